@@ -1,0 +1,195 @@
+"""The in-process closed loop: physics + references + controller + actuator, one or many runs.
+
+Per control tick k (period Delta t, ``p.substeps`` physics steps):
+    obs_k = observe(state, T_{k-1});  T_C = control_law(obs_k, ref_k);  T_k = saturate(T_C);
+    integrate one period holding T_k.
+The ROS graph does exactly the same across processes (sim node / controller node), with the
+same compiled functions, so a lockstep graph run reproduces these numbers.
+
+Batch runs (:func:`run_batch`) execute many parameter sets in parallel (numba ``prange``, one
+case per thread); a diverged case is reported as diverged, its samples are not used.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from numba import njit, prange
+
+from hexapod_sim.core.actuator import saturate
+from hexapod_sim.core.engine import advance, initial_state, observe
+from hexapod_sim.core.gait import Reference, reference
+from hexapod_sim.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
+from hexapod_sim.core.errors import ParameterError
+from hexapod_sim.core.params import N_LEGS, HexapodParams
+
+from .controllers import control_law, controller_code, gain_vector
+
+#: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
+BLOCK_TICKS = 2000
+
+
+@njit(cache=True)
+def run_ticks(s, P, code, gains, theta_d, theta_vel_d, torque, substeps, k0, obs_out,  # type: ignore[no-untyped-def]
+              cmd_out, rec_offset):
+    """Run ticks k0 .. k0 + len(theta_d) - 1 in place on state ``s`` and held ``torque``.
+
+    Records obs of tick k into obs_out[k - rec_offset] and the demanded torque into
+    cmd_out[k - rec_offset] when that row exists. Returns the number of ticks completed
+    (less than requested if the state diverged).
+    """
+    obs = np.empty((9, N_LEGS, 2))
+    demand = np.empty((N_LEGS, 2))
+    l1, l2, t_max = P[P_L1], P[P_L2], P[P_TMAX]
+    n = theta_d.shape[0]
+    for j in range(n):
+        observe(s, torque, P, obs)
+        control_law(code, gains, obs, theta_d[j], theta_vel_d[j], l1, l2, demand)
+        r = k0 + j - rec_offset
+        if 0 <= r < obs_out.shape[0]:
+            obs_out[r] = obs
+            cmd_out[r] = demand
+        saturate(demand, t_max, torque)
+        if not advance(s, torque, P, substeps):
+            return j
+    return n
+
+
+@njit(cache=True, parallel=True)
+def _batch_kernel(S, Ps, codes, G, theta_d, theta_vel_d, substeps, rec_offset, obs_out,  # type: ignore[no-untyped-def]
+                  ok):
+    n_ticks = theta_d.shape[0]
+    for c in prange(S.shape[0]):
+        torque = np.zeros((N_LEGS, 2))
+        cmd = np.empty((obs_out.shape[1], N_LEGS, 2))
+        done = run_ticks(S[c], Ps[c], codes[c], G[c], theta_d, theta_vel_d, torque, substeps,
+                         0, obs_out[c], cmd, rec_offset)
+        if done == n_ticks:
+            last = n_ticks - rec_offset
+            if 0 <= last < obs_out.shape[1]:
+                observe(S[c], torque, Ps[c], obs_out[c, last])
+            ok[c] = True
+        else:
+            ok[c] = False
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Samples of one run at the control ticks 0..N (obs) and the demands of ticks 0..N-1.
+
+    ``obs`` (N+1, 9, 6, 2) follows layout.OBS_FIELDS; ``command`` (N, 6, 2) is T_C (N m);
+    ``reference`` holds the desired trajectories at the same N+1 instants. ``diverged_at``
+    is the time (s) of the last good tick if the run blew up, else None.
+    """
+
+    params: HexapodParams
+    controller: str
+    t: np.ndarray
+    obs: np.ndarray
+    command: np.ndarray
+    reference: Reference
+    diverged_at: float | None = None
+
+
+def tick_count(p: HexapodParams, duration: float) -> int:
+    """Number of control periods in ``duration`` seconds (must be a whole number)."""
+    n = duration / p.sim.control_period
+    if n < 1 or abs(n - round(n)) > 1e-6:
+        raise ParameterError("run.duration", duration,
+                             f"a positive multiple of sim.control_period = "
+                             f"{p.sim.control_period:g} s")
+    return int(round(n))
+
+
+def run(p: HexapodParams, controller: str | None = None, duration: float | None = None,
+        progress: Callable[[int, int], None] | None = None) -> RunResult:
+    """One closed-loop run from the initial state; records every tick.
+
+    controller: 'pd_p' | 'pd_pf' (default p.run.controller); duration in s (default
+    p.run.duration). ``progress(done, total)`` is called after every block of ticks.
+    """
+    controller = controller or p.run.controller
+    code = controller_code(controller)
+    n = tick_count(p, p.run.duration if duration is None else duration)
+    t = np.arange(n + 1) * p.sim.control_period
+    ref = reference(p, t)
+    P = model_vector(p)
+    gains = gain_vector(p.gains(controller))
+    s = initial_state(p)
+    torque = np.zeros((N_LEGS, 2))
+    obs = np.full((n + 1,) + OBS_SHAPE, np.nan)
+    cmd = np.full((n, N_LEGS, 2), np.nan)
+    diverged_at = None
+    for k0 in range(0, n, BLOCK_TICKS):
+        k1 = min(n, k0 + BLOCK_TICKS)
+        done = run_ticks(s, P, code, gains, ref.theta[k0:k1], ref.theta_vel[k0:k1], torque,
+                         p.substeps, k0, obs[k0:k1], cmd[k0:k1], k0)
+        if progress is not None:
+            progress(k0 + done, n)
+        if done < k1 - k0:
+            diverged_at = float(t[k0 + done])
+            break
+    else:
+        observe(s, torque, P, obs[n])
+    return RunResult(p, controller, t, obs, cmd, ref, diverged_at)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One member of a batch: parameters and the controller that runs them."""
+
+    params: HexapodParams
+    controller: str
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Samples of ticks k_a..k_b of every case (``obs`` (cases, k_b-k_a+1, 9, 6, 2)),
+    the reference over the same ticks, and which cases finished without diverging."""
+
+    cases: tuple[Case, ...]
+    t: np.ndarray
+    obs: np.ndarray
+    reference: Reference
+    ok: np.ndarray
+
+
+def _shared_reference_key(p: HexapodParams) -> tuple:
+    return (p.robot, p.gait, p.sim.dt, p.sim.control_period)
+
+
+def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> BatchResult:
+    """Run every case for ``duration`` s in parallel; keep the ticks from ``record_from`` s on.
+
+    All cases must share robot geometry, gait and timing (they differ in ground, actuator,
+    body and gains), so that they share one reference trajectory.
+    """
+    if not cases:
+        raise ValueError("run_batch needs at least one case")
+    p0 = cases[0].params
+    key = _shared_reference_key(p0)
+    for c in cases:
+        if _shared_reference_key(c.params) != key:
+            raise ParameterError("gait", "differs between cases",
+                                 "one robot, gait and timing per batch (split the batch)")
+    n = tick_count(p0, duration)
+    k_a = int(math.floor(record_from / p0.sim.control_period + 1e-9))
+    if not 0 <= k_a <= n:
+        raise ParameterError("record_from", record_from, f"a time in [0, {duration:g}] s")
+    t = np.arange(n + 1) * p0.sim.control_period
+    ref = reference(p0, t)
+    S = np.stack([initial_state(c.params) for c in cases])
+    Ps = np.stack([model_vector(c.params) for c in cases])
+    codes = np.array([controller_code(c.controller) for c in cases], dtype=np.int64)
+    G = np.stack([gain_vector(c.params.gains(c.controller)) for c in cases])
+    obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
+    ok = np.zeros(len(cases), dtype=np.bool_)
+    _batch_kernel(S, Ps, codes, G, ref.theta[:n], ref.theta_vel[:n], p0.substeps, k_a, obs, ok)
+    window_ref = Reference(*(a[k_a:] for a in ref))
+    return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
+
+
+__all__ = ["BLOCK_TICKS", "BatchResult", "Case", "RunResult", "run", "run_batch", "run_ticks",
+           "tick_count"]

@@ -1,0 +1,96 @@
+"""The seven performance indices (paper eqs. 8-11), over one evaluation window.
+
+Input: N_S + 1 samples at the control ticks t_a = t_0 < t_1 < ... < t_N = t_b, spaced
+Delta t. L is measured between the first and the last sample; the sums and means run over
+samples 1..N (each sample carries the torque that acted over the period ending at it, see
+hexapod_sim.core.engine), so consecutive windows tile the run without overlap:
+
+    L      = mean_i (x_iH(t_b) - x_iH(t_a))                          distance walked (m)
+    E_av   = (1/L) sum_i sum_j sum_k |T_mij dtheta_ij| Delta t       (8)  J/m
+    T_L    = (1/L) sqrt(sum_i sum_j sum_k T_mij^2 Delta t)           (9)  N m s^0.5 / m
+    F_L    = (1/L) sqrt(sum_i sum_k (f_ix^2 + f_iy^2) Delta t)       (10) N s^0.5 / m
+    eps_xH = sum_i sqrt(mean_k (x_iHd - x_iH)^2), eps_yH, eps_xF, eps_yF alike (11a-d) (m)
+
+[resolution, model.md] eq. (10) sums over j although its integrand has no j: we drop that
+sum. The paper's Fig. 9 calls F_L "P_L".
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from hexapod_sim.core.errors import ParameterError
+from hexapod_sim.core.layout import O_FP, O_HF, O_HP, O_THV, O_TQ
+from hexapod_sim.core.params import HexapodParams
+
+#: Index names in report order, with units.
+INDEX_NAMES = ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF")
+INDEX_UNITS = {"E_av": "J/m", "T_L": "N m s^0.5/m", "F_L": "N s^0.5/m", "eps_xH": "m",
+               "eps_yH": "m", "eps_xF": "m", "eps_yF": "m", "L": "m"}
+
+
+@dataclass(frozen=True)
+class Indices:
+    """The seven indices of one window and the distance L they are normalised by."""
+
+    E_av: float
+    T_L: float
+    F_L: float
+    eps_xH: float
+    eps_yH: float
+    eps_xF: float
+    eps_yF: float
+    L: float
+
+    def as_dict(self) -> dict[str, float]:
+        """Name -> value, including L."""
+        return asdict(self)
+
+
+def _rms_sum(desired: np.ndarray, actual: np.ndarray) -> float:
+    """sum over legs of the RMS of (desired - actual) over samples; arrays (N, 6)."""
+    return float(np.sum(np.sqrt(np.mean((desired - actual) ** 2, axis=0))))
+
+
+def compute_indices(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
+                    hip_pos: np.ndarray, hip_ref: np.ndarray, foot_pos: np.ndarray,
+                    foot_ref: np.ndarray, dt: float) -> Indices:
+    """Indices from (N+1, 6, 2) arrays of samples at the control ticks, spaced dt (s).
+
+    torque T_m and joint_vel dtheta per joint; hip_force f_i, hip_pos/hip_ref and
+    foot_pos/foot_ref per Cartesian axis (x, y). Row 0 only supplies x_iH(t_a).
+    """
+    if hip_pos.shape[0] < 2:
+        raise ValueError("an evaluation window needs at least two samples")
+    dist = float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0]))
+    tq, w, f = torque[1:], joint_vel[1:], hip_force[1:]
+    e_av = float(np.sum(np.abs(tq * w)) * dt) / dist
+    t_l = float(np.sqrt(np.sum(tq * tq) * dt)) / dist
+    f_l = float(np.sqrt(np.sum(f * f) * dt)) / dist
+    hp, hr, fp, fr = hip_pos[1:], hip_ref[1:], foot_pos[1:], foot_ref[1:]
+    return Indices(e_av, t_l, f_l, _rms_sum(hr[..., 0], hp[..., 0]),
+                   _rms_sum(hr[..., 1], hp[..., 1]), _rms_sum(fr[..., 0], fp[..., 0]),
+                   _rms_sum(fr[..., 1], fp[..., 1]), dist)
+
+
+def indices_from_obs(obs: np.ndarray, hip_ref: np.ndarray, foot_ref: np.ndarray,
+                     dt: float) -> Indices:
+    """Indices from observation samples (N+1, 9, 6, 2) (hexapod_sim.core.layout) and refs."""
+    return compute_indices(obs[:, O_TQ], obs[:, O_THV], obs[:, O_HF], obs[:, O_HP], hip_ref,
+                           obs[:, O_FP], foot_ref, dt)
+
+
+def evaluation_window(p: HexapodParams, duration: float) -> tuple[float, float]:
+    """(t_a, t_b): the last ``run.eval_cycles`` full gait cycles that fit in ``duration`` (s)."""
+    period = p.cycle_time
+    full = int(np.floor(duration / period + 1e-9))
+    if full < p.run.eval_cycles:
+        raise ParameterError("run.duration", duration,
+                             f"at least run.eval_cycles x T = {p.run.eval_cycles * period:g} s")
+    t_b = full * period
+    return t_b - p.run.eval_cycles * period, t_b
+
+
+__all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "compute_indices", "evaluation_window",
+           "indices_from_obs"]

@@ -1,0 +1,97 @@
+"""Per-leg rigid-body dynamics with three point masses (paper eq. 5, model.md "Dynamics").
+
+Leg coordinates q = [x_H, y_H, theta1, theta2]; point masses m_H at the hip, m_K at the knee,
+m_F at the foot (model.md "Masses" [resolution]). With J_k = dp_k/dq:
+
+    H(q)     = sum_k m_k J_k^T J_k                      (4x4, kg / kg m / kg m^2)
+    c(q, dq) = sum_k m_k J_k^T (dJ_k dq)
+    g(q)     = -sum_k m_k J_k^T [0, -g]
+    H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF,   tau = [0, 0, T_m1, T_m2]
+
+Everything is written in scalars so that numba compiles it to allocation-free code.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def leg_terms(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav):  # type: ignore[no-untyped-def]
+    """Mass matrix and bias of one leg.
+
+    Returns (m, H02, H03, H12, H13, H22, H23, H33, b0, b1, b2, b3) where H00 = H11 = m
+    (the leg's total mass), H01 = 0, and b = c + g (N, N, N m, N m).
+    """
+    c1, s1 = np.cos(th1), np.sin(th1)
+    c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
+    a1, b1 = l1 * c1, l1 * s1          # d p_K / d theta1
+    a2, b2 = l2 * c12, l2 * s12        # d p_F / d theta2
+    af, bf = a1 + a2, b1 + b2          # d p_F / d theta1
+    m = mh + mk + mf
+    h02 = mk * a1 + mf * af
+    h03 = mf * a2
+    h12 = mk * b1 + mf * bf
+    h13 = mf * b2
+    h22 = mk * l1 * l1 + mf * (af * af + bf * bf)
+    h23 = mf * (a2 * af + b2 * bf)
+    h33 = mf * l2 * l2
+    # dJ dq of knee and foot (centripetal accelerations).
+    w12 = w1 + w2
+    kx, ky = -b1 * w1 * w1, a1 * w1 * w1
+    fx, fy = kx - b2 * w12 * w12, ky + a2 * w12 * w12
+    bias0 = mk * kx + mf * fx
+    bias1 = mk * ky + mf * fy + m * grav
+    bias2 = mk * (a1 * kx + b1 * ky) + mf * (af * fx + bf * fy) + grav * h12
+    bias3 = mf * (a2 * fx + b2 * fy) + grav * h13
+    return m, h02, h03, h12, h13, h22, h23, h33, bias0, bias1, bias2, bias3
+
+
+@njit(cache=True)
+def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ignore[no-untyped-def]
+              fhx, fhy, ffx, ffy):
+    """ddq = H^-1 (tau + J_H^T F_RH + J_F^T F_RF - c - g) for one leg.
+
+    tm1, tm2: joint torques (N m); (fhx, fhy): body force on the hip (N);
+    (ffx, ffy): ground force on the foot (N). Returns (ddx_H, ddy_H, ddtheta1, ddtheta2).
+    """
+    h00, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms(
+        th1, th2, w1, w2, l1, l2, mh, mk, mf, grav)
+    c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
+    a2, b2 = l2 * c12, l2 * s12
+    af, bf = l1 * np.cos(th1) + a2, l1 * np.sin(th1) + b2
+    r0 = fhx + ffx - bb0
+    r1 = fhy + ffy - bb1
+    r2 = tm1 + af * ffx + bf * ffy - bb2
+    r3 = tm2 + a2 * ffx + b2 * ffy - bb3
+    # Eliminate the hip translations (H00 = H11 = m, H01 = 0): Schur complement on (2, 3).
+    inv_m = 1.0 / h00
+    s22 = h22 - (h02 * h02 + h12 * h12) * inv_m
+    s23 = h23 - (h02 * h03 + h12 * h13) * inv_m
+    s33 = h33 - (h03 * h03 + h13 * h13) * inv_m
+    g2 = r2 - (h02 * r0 + h12 * r1) * inv_m
+    g3 = r3 - (h03 * r0 + h13 * r1) * inv_m
+    det = s22 * s33 - s23 * s23
+    a_2 = (s33 * g2 - s23 * g3) / det
+    a_3 = (s22 * g3 - s23 * g2) / det
+    a_0 = (r0 - h02 * a_2 - h03 * a_3) * inv_m
+    a_1 = (r1 - h12 * a_2 - h13 * a_3) * inv_m
+    return a_0, a_1, a_2, a_3
+
+
+def mass_matrix(q: np.ndarray, l1: float, l2: float, mh: float, mk: float,
+                mf: float) -> np.ndarray:
+    """Full 4x4 H(q) of one leg (for tests and comparisons), q = [x_H, y_H, th1, th2]."""
+    h00, h02, h03, h12, h13, h22, h23, h33, *_ = leg_terms(
+        q[2], q[3], 0.0, 0.0, l1, l2, mh, mk, mf, 0.0)
+    return np.array([[h00, 0.0, h02, h03], [0.0, h00, h12, h13],
+                     [h02, h12, h22, h23], [h03, h13, h23, h33]])
+
+
+def bias_forces(q: np.ndarray, dq: np.ndarray, l1: float, l2: float, mh: float, mk: float,
+                mf: float, grav: float) -> np.ndarray:
+    """c(q, dq) + g(q) of one leg (for tests and comparisons)."""
+    return np.array(leg_terms(q[2], q[3], dq[2], dq[3], l1, l2, mh, mk, mf, grav)[8:])
+
+
+__all__ = ["bias_forces", "leg_accel", "leg_terms", "mass_matrix"]

@@ -1,0 +1,94 @@
+"""Planar two-link leg kinematics (model.md "Per-leg coordinates and kinematics").
+
+Frame: world x forward, y up. theta1 is the thigh angle from the downward vertical,
+positive swinging the thigh forward; theta2 is the knee angle relative to the thigh.
+
+    knee  p_K = p_H + L1 [sin th1, -cos th1]
+    foot  p_F = p_K + L2 [sin(th1+th2), -cos(th1+th2)]
+    Psi(theta) = p_H - p_F          (hip relative to foot, paper eq. 4b)
+    J = dPsi/dtheta                  (2x2, paper eq. 4c)
+
+The compiled functions accept scalars or numpy arrays (numba specialises per type), so the
+engine's inner loop, the trajectory generator and the controllers share one implementation.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .errors import UnreachableTargetError
+
+
+@njit(cache=True)
+def knee_offset(th1, l1):  # type: ignore[no-untyped-def]
+    """Knee minus hip, (dx, dy) in m."""
+    return l1 * np.sin(th1), -l1 * np.cos(th1)
+
+
+@njit(cache=True)
+def foot_offset(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
+    """Foot minus hip, (dx, dy) in m; equals -Psi(theta)."""
+    a = th1 + th2
+    return l1 * np.sin(th1) + l2 * np.sin(a), -l1 * np.cos(th1) - l2 * np.cos(a)
+
+
+@njit(cache=True)
+def psi(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
+    """Psi(theta) = p_H - p_F, hip relative to foot (m), paper eq. (4b)."""
+    dx, dy = foot_offset(th1, th2, l1, l2)
+    return -dx, -dy
+
+
+@njit(cache=True)
+def psi_jacobian(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
+    """J = dPsi/dtheta as (J11, J12, J21, J22), paper eq. (4c)."""
+    a = th1 + th2
+    c1, s1, ca, sa = np.cos(th1), np.sin(th1), np.cos(a), np.sin(a)
+    return -l1 * c1 - l2 * ca, -l2 * ca, -l1 * s1 - l2 * sa, -l2 * sa
+
+
+@njit(cache=True)
+def joint_rates(th1, th2, vx, vy, l1, l2):  # type: ignore[no-untyped-def]
+    """theta_dot = J^-1 v for a hip-relative-to-foot velocity v = d/dt Psi (rad/s)."""
+    j11, j12, j21, j22 = psi_jacobian(th1, th2, l1, l2)
+    det = j11 * j22 - j12 * j21
+    return (j22 * vx - j12 * vy) / det, (-j21 * vx + j11 * vy) / det
+
+
+@njit(cache=True)
+def foot_force_torque(th1, th2, fx, fy, l1, l2):  # type: ignore[no-untyped-def]
+    """Joint torques (N m) produced by a force F (N) at the foot: theta rows of J_F^T F.
+
+    J_F's theta columns are dp_F/dtheta = -J, so this is -J^T F.
+    """
+    j11, j12, j21, j22 = psi_jacobian(th1, th2, l1, l2)
+    return -(j11 * fx + j21 * fy), -(j12 * fx + j22 * fy)
+
+
+def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float,
+                       l2: float) -> tuple[np.ndarray, np.ndarray]:
+    """theta = Psi^-1(p) for p = p_H - p_F, forward knee (theta2 < 0), paper eq. (4b).
+
+    Raises :class:`UnreachableTargetError` if any target lies outside the annulus
+    |L1 - L2| <= |p| <= L1 + L2; never clips.
+    """
+    px = np.asarray(px, dtype=float)
+    py = np.asarray(py, dtype=float)
+    r2 = px * px + py * py
+    r = np.sqrt(r2)
+    bad = (r > l1 + l2) | (r < abs(l1 - l2)) | ~np.isfinite(r)
+    if np.any(bad):
+        k = int(np.flatnonzero(np.ravel(bad))[0])
+        raise UnreachableTargetError(
+            f"IK target |p| = {np.ravel(r)[k]:.6g} m outside the leg's reach "
+            f"[{abs(l1 - l2):.6g}, {l1 + l2:.6g}] m")
+    # Foot relative to hip, measured in a frame whose first axis points down.
+    down, fwd = py, -px
+    c2 = np.clip((r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2), -1.0, 1.0)
+    th2 = -np.arccos(c2)
+    th1 = np.arctan2(fwd, down) - np.arctan2(l2 * np.sin(th2), l1 + l2 * np.cos(th2))
+    return th1, th2
+
+
+__all__ = ["foot_force_torque", "foot_offset", "inverse_kinematics", "joint_rates",
+           "knee_offset", "psi", "psi_jacobian"]

@@ -1,0 +1,354 @@
+"""Parameters: one frozen dataclass per group, one table of ranges, one validator, one loader.
+
+The YAML file is a ROS 2 params file (``/**: ros__parameters: <group>: <name>: value``);
+nested keys become dotted ROS parameter names (``ground.k_y``). The same table
+(:data:`SPECS`) gives the ROS nodes their parameter descriptors, so the nodes, the
+engine and the CLI accept and reject exactly the same values.
+
+Units are SI throughout (m, kg, s, N, N·m). Defaults are the paper's base experiment
+(model.md, "Experiments", E1).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from .errors import ParameterError, ParamsFileError
+
+N_LEGS = 6
+CONTROLLERS = ("pd_p", "pd_pf")
+MODES = ("lockstep", "realtime")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Type, range and meaning of one parameter."""
+
+    kind: type
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: tuple[str, ...] = ()
+    allow_inf: bool = False
+
+    def allowed(self) -> str:
+        """Human text of the allowed values, used in error messages and descriptors."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        if self.lo is None and self.hi is None:
+            return f"any {self.kind.__name__}"
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        left = "(" if self.lo_open or self.lo is None else "["
+        right = ")" if (self.hi_open or self.hi is None) and not self.allow_inf else "]"
+        if self.allow_inf:
+            hi = "inf"
+        return f"{self.kind.__name__} in {left}{lo}, {hi}{right}"
+
+
+def _f(desc: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+       hi_open: bool = False, allow_inf: bool = False) -> Any:
+    return field(metadata={"spec": Spec(float, desc, lo, hi, lo_open, hi_open, (), allow_inf)})
+
+
+def _i(desc: str, lo: int, hi: int) -> Any:
+    return field(metadata={"spec": Spec(int, desc, lo, hi)})
+
+
+def _s(desc: str, choices: tuple[str, ...]) -> Any:
+    return field(metadata={"spec": Spec(str, desc, choices=choices)})
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """Geometry and masses (model.md "Masses": point masses at hip, knee and foot)."""
+
+    leg_length_1: float = _f("thigh length L_i1 (m)", 0.0, 100.0, lo_open=True)
+    leg_length_2: float = _f("shank length L_i2 (m)", 0.0, 100.0, lo_open=True)
+    mass_1: float = _f("thigh mass M_i1, a point mass at the knee (kg)", 0.0, 1e4, lo_open=True)
+    mass_2: float = _f("shank mass M_i2, a point mass at the foot (kg)", 0.0, 1e4, lo_open=True)
+    body_mass: float = _f("body mass M_b, split into 6 hip point masses (kg)", 0.0, 1e5,
+                          lo_open=True)
+    stroke_pitch: float = _f("stroke pitch S_P between leg pairs (m)", 0.0, 100.0)
+    foot_offset: float = _f("foot trajectory offset O_i (m)", -100.0, 100.0)
+
+
+@dataclass(frozen=True)
+class BodyParams:
+    """Spring-dashpots between body segments (model.md "Body compliance")."""
+
+    k_x: float = _f("body stiffness K_x (N/m)", 0.0, 1e12)
+    k_y: float = _f("body stiffness K_y (N/m)", 0.0, 1e12)
+    b_x: float = _f("body damping B_x (N s/m)", 0.0, 1e12)
+    b_y: float = _f("body damping B_y (N s/m)", 0.0, 1e12)
+
+
+@dataclass(frozen=True)
+class GroundParams:
+    """Foot-ground spring-dashpot (model.md "Ground contact"); the effective values are base x scale."""
+
+    k_x: float = _f("ground stiffness K_x at 100 % (N/m)", 0.0, 1e12)
+    k_y: float = _f("ground stiffness K_y at 100 % (N/m)", 0.0, 1e12)
+    b_x: float = _f("ground damping B_x at 100 % (N s/m)", 0.0, 1e12)
+    b_y: float = _f("ground damping B_y at 100 % (N s/m)", 0.0, 1e12)
+    scale: float = _f("factor on all four ground parameters (1.0 = 100 %, the sweep variable)",
+                      0.0, 1e6, lo_open=True)
+    friction_mu: float = _f("Coulomb limit |F_x| <= mu F_y; 0 disables it (paper: none)",
+                            0.0, 100.0)
+
+
+@dataclass(frozen=True)
+class GaitParams:
+    """Wave gait and trajectory (paper eqs. 1-4)."""
+
+    duty_factor: float = _f("duty factor beta", 0.0, 1.0, lo_open=True, hi_open=True)
+    step_length: float = _f("step length L_S (m)", 0.0, 100.0, lo_open=True)
+    body_height: float = _f("body (hip) height H_B (m)", 0.0, 100.0, lo_open=True)
+    foot_clearance: float = _f("maximum foot clearance F_C (m)", 0.0, 100.0)
+    velocity: float = _f("forward body velocity V_F (m/s)", 0.0, 100.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class ActuatorParams:
+    """Joint actuators (paper eq. 6)."""
+
+    t_max: float = _f("torque saturation T_max (N m); .inf = ideal actuator", 0.0, None,
+                      lo_open=True, allow_inf=True)
+
+
+@dataclass(frozen=True)
+class GainParams:
+    """G_c1 = Kp + Kd s per joint and the inner gain K_f (paper eq. 7, Table I)."""
+
+    kp1: float = _f("hip joint proportional gain Kp_1 (N m/rad)", 0.0, 1e9)
+    kd1: float = _f("hip joint derivative gain Kd_1 (N m s/rad)", 0.0, 1e9)
+    kp2: float = _f("knee joint proportional gain Kp_2 (N m/rad)", 0.0, 1e9)
+    kd2: float = _f("knee joint derivative gain Kd_2 (N m s/rad)", 0.0, 1e9)
+    kf: float = _f("inner loop gain K_f (G_c2)", 0.0, 100.0)
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        """(Kp1, Kd1, Kp2, Kd2, K_f)."""
+        return (self.kp1, self.kd1, self.kp2, self.kd2, self.kf)
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Integration, control rate and graph timing."""
+
+    dt: float = _f("physics step (s)", 0.0, 0.01, lo_open=True)
+    control_period: float = _f("control period, a multiple of dt (s)", 0.0, 0.1, lo_open=True)
+    mode: str = _s("graph mode", MODES)
+    lockstep_timeout: float = _f("lockstep: wall time to wait for a command before a missed "
+                                 "tick (s)", 0.0, 60.0, lo_open=True)
+    hold_time: float = _f("controller silent this long (sim s): hold the last torque, then "
+                          "fall back to joint damping", 0.0, 10.0, lo_open=True)
+    fallback_damping: float = _f("joint damping of the safe fallback (N m s/rad)", 0.0, 1e6)
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """What one run does."""
+
+    controller: str = _s("controller in charge", CONTROLLERS)
+    duration: float = _f("simulated duration (s)", 0.0, 1e6, lo_open=True)
+    eval_cycles: int = _i("gait cycles at the end of the run that the indices cover", 1, 1000)
+
+
+_GROUP_TYPES: dict[str, type] = {
+    "robot": RobotParams, "body": BodyParams, "ground": GroundParams, "gait": GaitParams,
+    "actuator": ActuatorParams, "pd_p": GainParams, "pd_pf": GainParams, "sim": SimParams,
+    "run": RunParams,
+}
+
+
+@dataclass(frozen=True)
+class HexapodParams:
+    """All parameters; ``HexapodParams()`` has no defaults of its own: use :func:`load_params`."""
+
+    robot: RobotParams
+    body: BodyParams
+    ground: GroundParams
+    gait: GaitParams
+    actuator: ActuatorParams
+    pd_p: GainParams
+    pd_pf: GainParams
+    sim: SimParams
+    run: RunParams
+
+    # -- derived quantities --------------------------------------------------
+    @property
+    def cycle_time(self) -> float:
+        """T = L_S / V_F (s)."""
+        return self.gait.step_length / self.gait.velocity
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control period."""
+        return int(round(self.sim.control_period / self.sim.dt))
+
+    def gains(self, controller: str) -> GainParams:
+        """Gains of ``controller`` ('pd_p' or 'pd_pf')."""
+        check_controller(controller)
+        return self.pd_p if controller == "pd_p" else self.pd_pf
+
+    def with_values(self, **dotted: Any) -> "HexapodParams":
+        """A validated copy with some parameters changed: ``p.with_values(**{'ground.scale': 2})``."""
+        flat = self.to_flat()
+        for name, value in dotted.items():
+            if name not in flat:
+                raise ParameterError(name, value, "a known parameter name")
+            flat[name] = value
+        return from_flat(flat)
+
+    def to_flat(self) -> dict[str, Any]:
+        """Dotted name -> value, the ROS parameter view."""
+        out: dict[str, Any] = {}
+        for group in fields(self):
+            for f in fields(_GROUP_TYPES[group.name]):
+                out[f"{group.name}.{f.name}"] = getattr(getattr(self, group.name), f.name)
+        return out
+
+
+def specs() -> dict[str, Spec]:
+    """Dotted parameter name -> :class:`Spec`, for every parameter."""
+    return {f"{g}.{f.name}": f.metadata["spec"] for g, t in _GROUP_TYPES.items()
+            for f in fields(t)}
+
+
+SPECS: dict[str, Spec] = specs()
+
+
+def check_value(name: str, value: Any) -> Any:
+    """Check one parameter against its spec; return it converted (int -> float where due)."""
+    spec = SPECS.get(name)
+    if spec is None:
+        raise ParameterError(name, value, "a known parameter name (see the params file)")
+    if spec.kind is str:
+        if not isinstance(value, str) or value not in spec.choices:
+            raise ParameterError(name, value, spec.allowed())
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.kind is int:
+        if isinstance(value, float) and not value.is_integer():
+            raise ParameterError(name, value, spec.allowed())
+        value = int(value)
+    else:
+        value = float(value)
+    if math.isnan(value) or (math.isinf(value) and not (spec.allow_inf and value > 0)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.lo is not None and (value < spec.lo or (spec.lo_open and value == spec.lo)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.hi is not None and (value > spec.hi or (spec.hi_open and value == spec.hi)):
+        raise ParameterError(name, value, spec.allowed())
+    return value
+
+
+def check_controller(controller: str) -> str:
+    """Validate a controller name."""
+    return check_value("run.controller", controller)
+
+
+def validate(p: HexapodParams) -> HexapodParams:
+    """Cross-parameter checks (single values are checked on construction by :func:`from_flat`).
+
+    Raises :class:`ParameterError` naming the offending parameter.
+    """
+    ratio = p.sim.control_period / p.sim.dt
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        raise ParameterError("sim.control_period", p.sim.control_period,
+                             f"an integer multiple of sim.dt = {p.sim.dt:g}")
+    # Reachability of the whole gait: the hip-foot distance over a cycle (eq. 4a).
+    from .gait import reach_bounds  # local import: gait imports this module
+
+    lo, hi = reach_bounds(p)
+    r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
+    r_max = p.robot.leg_length_1 + p.robot.leg_length_2
+    if hi >= r_max:
+        raise ParameterError("gait.body_height", p.gait.body_height,
+                             f"a gait whose hip-foot distance stays below L1+L2 = {r_max:g} m "
+                             f"(this one reaches {hi:.4g} m: unreachable gait)")
+    if lo <= r_min:
+        raise ParameterError("gait.body_height", p.gait.body_height,
+                             f"a gait whose hip-foot distance stays above |L1-L2| = {r_min:g} m "
+                             f"(this one comes to {lo:.4g} m: unreachable gait)")
+    return p
+
+
+def from_flat(flat: Mapping[str, Any]) -> HexapodParams:
+    """Build and validate parameters from dotted names; every parameter must be present."""
+    groups: dict[str, dict[str, Any]] = {g: {} for g in _GROUP_TYPES}
+    for name, value in flat.items():
+        value = check_value(name, value)
+        group, _, key = name.partition(".")
+        groups[group][key] = value
+    for g, t in _GROUP_TYPES.items():
+        for f in fields(t):
+            if f.name not in groups[g]:
+                raise ParameterError(f"{g}.{f.name}", None, "a value in the params file "
+                                     f"({SPECS[f'{g}.{f.name}'].allowed()})")
+    p = HexapodParams(**{g: t(**groups[g]) for g, t in _GROUP_TYPES.items()})
+    return validate(p)
+
+
+def default_params_path() -> Path:
+    """The shipped params file with the paper's base experiment."""
+    return Path(__file__).resolve().parent.parent / "config" / "hexapod.yaml"
+
+
+def _flatten(prefix: str, tree: Mapping[str, Any], out: dict[str, Any]) -> None:
+    for key, value in tree.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, Mapping):
+            _flatten(name, value, out)
+        else:
+            out[name] = value
+
+
+def read_params_file(path: str | Path) -> dict[str, Any]:
+    """Dotted name -> value from a ROS 2 params file (the ``/**`` section, then node sections)."""
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise ParamsFileError(f"cannot read params file {path}: {err.strerror}") from err
+    except yaml.YAMLError as err:
+        raise ParamsFileError(f"params file {path} is not valid YAML: {err}") from err
+    if not isinstance(doc, Mapping) or not doc:
+        raise ParamsFileError(f"params file {path}: expected '/**: ros__parameters: ...'")
+    flat: dict[str, Any] = {}
+    for node, body in doc.items():
+        if not isinstance(body, Mapping) or not isinstance(body.get("ros__parameters"), Mapping):
+            raise ParamsFileError(f"params file {path}: section '{node}' lacks 'ros__parameters'")
+        _flatten("", body["ros__parameters"], flat)
+    return flat
+
+
+def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodParams:
+    """Load and validate the params file (default: the shipped base experiment).
+
+    ``overrides`` use dotted names with '.' replaced by '__' (``ground__scale=2.0``) or can be
+    given as a dict via ``load_params(path, **{"ground.scale": 2.0})``.
+    """
+    flat = read_params_file(path or default_params_path())
+    known = {k: v for k, v in flat.items() if k in SPECS}
+    for name, value in overrides.items():
+        name = name.replace("__", ".")
+        if name not in SPECS:
+            raise ParameterError(name, value, "a known parameter name")
+        known[name] = value
+    return from_flat(known)
+
+
+__all__ = [
+    "ActuatorParams", "BodyParams", "CONTROLLERS", "GainParams", "GaitParams", "GroundParams",
+    "HexapodParams", "MODES", "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec",
+    "check_controller", "check_value", "default_params_path", "from_flat", "load_params",
+    "read_params_file", "validate",
+]
