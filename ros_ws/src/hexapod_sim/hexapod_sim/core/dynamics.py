@@ -48,35 +48,54 @@ def leg_terms(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav):  # type: ignore[no-un
 
 
 @njit(cache=True)
-def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ignore[no-untyped-def]
-              fhx, fhy, ffx, ffy):
-    """ddq = H^-1 (tau + J_H^T F_RH + J_F^T F_RF - c - g) for one leg.
+def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore[no-untyped-def]
+               r0, r1, r2, r3):
+    """Solve A x = r for a symmetric positive definite 4x4 A (upper triangle given), by LDL^T."""
+    d0 = a00
+    l10 = a01 / d0
+    l20 = a02 / d0
+    l30 = a03 / d0
+    d1 = a11 - l10 * l10 * d0
+    l21 = (a12 - l20 * l10 * d0) / d1
+    l31 = (a13 - l30 * l10 * d0) / d1
+    d2 = a22 - l20 * l20 * d0 - l21 * l21 * d1
+    l32 = (a23 - l30 * l20 * d0 - l31 * l21 * d1) / d2
+    d3 = a33 - l30 * l30 * d0 - l31 * l31 * d1 - l32 * l32 * d2
+    y0 = r0
+    y1 = r1 - l10 * y0
+    y2 = r2 - l20 * y0 - l21 * y1
+    y3 = r3 - l30 * y0 - l31 * y1 - l32 * y2
+    x3 = y3 / d3
+    x2 = y2 / d2 - l32 * x3
+    x1 = y1 / d1 - l21 * x2 - l31 * x3
+    x0 = y0 / d0 - l10 * x1 - l20 * x2 - l30 * x3
+    return x0, x1, x2, x3
 
-    tm1, tm2: joint torques (N m); (fhx, fhy): body force on the hip (N);
-    (ffx, ffy): ground force on the foot (N). Returns (ddx_H, ddy_H, ddtheta1, ddtheta2).
+
+@njit(cache=True)
+def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ignore[no-untyped-def]
+              fhx, fhy, ffx, ffy, bx, by, h):
+    """ddq of one leg from H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF (paper eq. 5).
+
+    tm1, tm2: joint torques (N m); (fhx, fhy): body force on the hip (N); (ffx, ffy): ground
+    force on the foot at the current velocity (N). (bx, by) (N s/m) and h (s): ground damping
+    taken linearly implicit over a step h, i.e. F_RF = F - h B J_F ddq, which gives
+    (H + h J_F^T B J_F) ddq = rhs. h = 0 is the plain explicit solve.
+    Returns (ddx_H, ddy_H, ddtheta1, ddtheta2).
     """
-    h00, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms(
+    m, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms(
         th1, th2, w1, w2, l1, l2, mh, mk, mf, grav)
-    c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
-    a2, b2 = l2 * c12, l2 * s12
+    a2, b2 = l2 * np.cos(th1 + th2), l2 * np.sin(th1 + th2)
     af, bf = l1 * np.cos(th1) + a2, l1 * np.sin(th1) + b2
-    r0 = fhx + ffx - bb0
-    r1 = fhy + ffy - bb1
-    r2 = tm1 + af * ffx + bf * ffy - bb2
-    r3 = tm2 + a2 * ffx + b2 * ffy - bb3
-    # Eliminate the hip translations (H00 = H11 = m, H01 = 0): Schur complement on (2, 3).
-    inv_m = 1.0 / h00
-    s22 = h22 - (h02 * h02 + h12 * h12) * inv_m
-    s23 = h23 - (h02 * h03 + h12 * h13) * inv_m
-    s33 = h33 - (h03 * h03 + h13 * h13) * inv_m
-    g2 = r2 - (h02 * r0 + h12 * r1) * inv_m
-    g3 = r3 - (h03 * r0 + h13 * r1) * inv_m
-    det = s22 * s33 - s23 * s23
-    a_2 = (s33 * g2 - s23 * g3) / det
-    a_3 = (s22 * g3 - s23 * g2) / det
-    a_0 = (r0 - h02 * a_2 - h03 * a_3) * inv_m
-    a_1 = (r1 - h12 * a_2 - h13 * a_3) * inv_m
-    return a_0, a_1, a_2, a_3
+    # J_F = [[1, 0, af, a2], [0, 1, bf, b2]]; D = h J_F^T diag(bx, by) J_F
+    hx, hy = h * bx, h * by
+    return solve_spd4(
+        m + hx, 0.0, h02 + hx * af, h03 + hx * a2,
+        m + hy, h12 + hy * bf, h13 + hy * b2,
+        h22 + hx * af * af + hy * bf * bf, h23 + hx * af * a2 + hy * bf * b2,
+        h33 + hx * a2 * a2 + hy * b2 * b2,
+        fhx + ffx - bb0, fhy + ffy - bb1,
+        tm1 + af * ffx + bf * ffy - bb2, tm2 + a2 * ffx + b2 * ffy - bb3)
 
 
 def mass_matrix(q: np.ndarray, l1: float, l2: float, mh: float, mk: float,
@@ -94,4 +113,4 @@ def bias_forces(q: np.ndarray, dq: np.ndarray, l1: float, l2: float, mh: float, 
     return np.array(leg_terms(q[2], q[3], dq[2], dq[3], l1, l2, mh, mk, mf, grav)[8:])
 
 
-__all__ = ["bias_forces", "leg_accel", "leg_terms", "mass_matrix"]
+__all__ = ["bias_forces", "leg_accel", "leg_terms", "mass_matrix", "solve_spd4"]

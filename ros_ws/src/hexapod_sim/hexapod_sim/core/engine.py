@@ -4,6 +4,14 @@
 dq += dt ddq, then q += dt dq; the contact state is updated every step. The joint torques
 are held constant between control ticks (zero-order hold) by the caller.
 
+[departure, sim.integrator] With the paper's ground (B_gy = 1e4 N s/m on a 1 kg foot) the
+contact's damping time constant m/B = 1e-4 s equals dt, which explicit damping cannot resolve:
+PD-P&F's indices then move by ~8 % between dt and dt/2. The default integrator,
+``implicit_ground_damping``, evaluates the ground dampers at the end-of-step velocity
+(a linearly implicit step per leg: (H + dt J_F^T B J_F) ddq = rhs), which keeps the base-case
+indices within 1 % of a dt/2 run (tests/test_engine.py). ``semi_implicit_euler`` keeps
+model.md's scheme as written.
+
 Observation convention (used by the engine, the sim node and the analysis alike): the sample
 at tick k holds the state at t_k and the torque *acting at that instant*, i.e. the held torque
 T_{k-1} applied over (t_{k-1}, t_k]; the hip force f_i is evaluated at the same state with the
@@ -15,20 +23,51 @@ import numpy as np
 from numba import njit
 
 from .body import body_forces
-from .contact import ground_force
+from .contact import limit_force, update_contact
 from .dynamics import leg_accel
 from .errors import DivergenceError
 from .gait import reference
 from .kinematics import foot_offset
 from .layout import (C0, O_FF, O_FP, O_FV, O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ,
-                     OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_KBX, P_KBY,
-                     P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
+                     OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL, P_KBX,
+                     P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
                      model_vector)
 from .params import N_LEGS, HexapodParams
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
 MAX_COORD = 1e4
 MAX_RATE = 1e4
+
+
+@njit(cache=True)
+def leg_contact_accel(th1, th2, w1, w2, P, tm1, tm2, fhx, fhy, x, y, vx, vy, x_touch, h):  # type: ignore[no-untyped-def]
+    """Accelerations of a leg whose foot is in contact, and the ground force it feels.
+
+    The spring terms use the current position; the damping terms the velocity at the end of
+    the step of length h (h = 0: the current velocity, i.e. plain semi-implicit Euler). The
+    force is then limited ("the ground never pulls"; Coulomb if mu > 0) and, if a limit
+    applies, the leg is solved again with the limited force held fixed.
+    Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
+    """
+    l1, l2 = P[P_L1], P[P_L2]
+    bx, by = P[P_BGX], P[P_BGY]
+    fx = -P[P_KGX] * (x - x_touch) - bx * vx
+    fy = -P[P_KGY] * y - by * vy
+    a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF], P[P_G],
+                               tm1, tm2, fhx, fhy, fx, fy, bx, by, h)
+    if h > 0.0:
+        # end-of-step foot velocity change: J_F ddq h
+        c1, s1 = np.cos(th1), np.sin(th1)
+        c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
+        dvx = h * (a0 + (l1 * c1 + l2 * c12) * a2 + l2 * c12 * a3)
+        dvy = h * (a1 + (l1 * s1 + l2 * s12) * a2 + l2 * s12 * a3)
+        fx -= bx * dvx
+        fy -= by * dvy
+    lx, ly = limit_force(fx, fy, P[P_MU])
+    if lx != fx or ly != fy:
+        a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF], P[P_G],
+                                   tm1, tm2, fhx, fhy, lx, ly, 0.0, 0.0, 0.0)
+    return a0, a1, a2, a3, lx, ly
 
 
 @njit(cache=True)
@@ -41,23 +80,30 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
     q = s[Q0:Q0 + 24].reshape(N_LEGS, 4)
     dq = s[V0:V0 + 24].reshape(N_LEGS, 4)
     l1, l2 = P[P_L1], P[P_L2]
+    h = P[P_DT] if P[P_IMPL] != 0.0 else 0.0
     body_forces(q, dq, P[P_HIPX:P_HIPX + N_LEGS], P[P_KBX], P[P_KBY], P[P_BBX], P[P_BBY], fh)
     for i in range(N_LEGS):
         th1, th2, w1, w2 = q[i, 2], q[i, 3], dq[i, 2], dq[i, 3]
         dx, dy = foot_offset(th1, th2, l1, l2)
-        # foot velocity = hip velocity + J_F,theta dtheta, with J_F,theta = -J (kinematics.py)
-        w12 = w1 + w2
-        c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2)
-        vx = dq[i, 0] + l1 * c1 * w1 + l2 * c12 * w12
-        vy = dq[i, 1] + l1 * s1 * w1 + l2 * s12 * w12
-        fx, fy, c, xt = ground_force(q[i, 0] + dx, q[i, 1] + dy, vx, vy, s[C0 + i], s[X0 + i],
-                                     P[P_KGX], P[P_KGY], P[P_BGX], P[P_BGY], P[P_MU])
+        x, y = q[i, 0] + dx, q[i, 1] + dy
+        c, xt = update_contact(x, y, s[C0 + i], s[X0 + i])
         s[C0 + i] = c
         s[X0 + i] = xt
+        if c != 0.0:
+            # foot velocity = hip velocity + J_F,theta dtheta (J_F,theta = -J, kinematics.py)
+            w12 = w1 + w2
+            vx = dq[i, 0] + l1 * np.cos(th1) * w1 + l2 * np.cos(th1 + th2) * w12
+            vy = dq[i, 1] + l1 * np.sin(th1) * w1 + l2 * np.sin(th1 + th2) * w12
+            a0, a1, a2, a3, fx, fy = leg_contact_accel(th1, th2, w1, w2, P, torque[i, 0],
+                                                       torque[i, 1], fh[i, 0], fh[i, 1], x, y,
+                                                       vx, vy, xt, h)
+        else:
+            fx, fy = 0.0, 0.0
+            a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF],
+                                       P[P_G], torque[i, 0], torque[i, 1], fh[i, 0], fh[i, 1],
+                                       0.0, 0.0, 0.0, 0.0, 0.0)
         ff[i, 0] = fx
         ff[i, 1] = fy
-        a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF], P[P_G],
-                                   torque[i, 0], torque[i, 1], fh[i, 0], fh[i, 1], fx, fy)
         qdd[i, 0] = a0
         qdd[i, 1] = a1
         qdd[i, 2] = a2

@@ -7,7 +7,7 @@ State vector ``s`` (float64, length :data:`STATE_SIZE`):
     s[X0:X0+6]    stored touchdown point x_0 of foot i (m), valid while in contact
 
 Model vector ``P`` (float64, length :data:`MODEL_SIZE`): the physical parameters in SI units,
-effective ground values (base x scale) and the nominal hip offsets.
+effective ground values (base x scale), the integrator flag and the nominal hip offsets.
 
 Observation ``obs`` (float64, shape (9, 6, 2)) at one control tick, rows :data:`OBS_FIELDS`.
 """
@@ -21,7 +21,7 @@ Q0, V0, C0, X0 = 0, 24, 48, 54
 STATE_SIZE = 60
 
 (P_L1, P_L2, P_MH, P_MK, P_MF, P_G, P_KBX, P_KBY, P_BBX, P_BBY, P_KGX, P_KGY, P_BGX, P_BGY,
- P_MU, P_TMAX, P_DT, P_HIPX) = range(18)
+ P_MU, P_TMAX, P_DT, P_IMPL, P_HIPX) = range(19)
 MODEL_SIZE = P_HIPX + N_LEGS
 GRAVITY = 9.81
 
@@ -44,6 +44,7 @@ def model_vector(p: HexapodParams) -> np.ndarray:
     P[P_MU] = g.friction_mu
     P[P_TMAX] = p.actuator.t_max
     P[P_DT] = p.sim.dt
+    P[P_IMPL] = 1.0 if p.sim.integrator == "implicit_ground_damping" else 0.0
     P[P_HIPX:P_HIPX + N_LEGS] = -(np.arange(N_LEGS) // 2) * r.stroke_pitch
     return P
 

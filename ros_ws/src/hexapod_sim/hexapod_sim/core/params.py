@@ -22,6 +22,7 @@ from .errors import ParameterError, ParamsFileError
 N_LEGS = 6
 CONTROLLERS = ("pd_p", "pd_pf")
 MODES = ("lockstep", "realtime")
+INTEGRATORS = ("implicit_ground_damping", "semi_implicit_euler")
 
 
 @dataclass(frozen=True)
@@ -142,6 +143,8 @@ class SimParams:
     """Integration, control rate and graph timing."""
 
     dt: float = _f("physics step (s)", 0.0, 0.01, lo_open=True)
+    integrator: str = _s("semi_implicit_euler as model.md; implicit_ground_damping (default) "
+                         "also takes the ground dampers at the end-of-step velocity", INTEGRATORS)
     control_period: float = _f("control period, a multiple of dt (s)", 0.0, 0.1, lo_open=True)
     mode: str = _s("graph mode", MODES)
     lockstep_timeout: float = _f("lockstep: wall time to wait for a command before a missed "
@@ -348,7 +351,7 @@ def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodPara
 
 __all__ = [
     "ActuatorParams", "BodyParams", "CONTROLLERS", "GainParams", "GaitParams", "GroundParams",
-    "HexapodParams", "MODES", "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec",
+    "HexapodParams", "INTEGRATORS", "MODES", "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec",
     "check_controller", "check_value", "default_params_path", "from_flat", "load_params",
     "read_params_file", "validate",
 ]

@@ -1,0 +1,136 @@
+"""`hexapod`: the project's command line (simulate, analyze, sweep, tune, reproduce, switch, status).
+
+Each subcommand lives in a module that registers itself with :func:`register`-style
+``add_parser(subparsers)`` functions listed in :data:`COMMAND_MODULES`; this file only wires
+them, turns the project's errors into one line on stderr and a non-zero exit.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from hexapod_sim.core.errors import HexapodError
+from hexapod_sim.core.params import HexapodParams, load_params
+
+#: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
+#: so that a partial install still offers what it has.
+COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_analysis")
+
+
+def params_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every engine command shares: params file and the usual overrides."""
+    parser.add_argument("--params", help="ROS 2 params file (default: the shipped base case)")
+    parser.add_argument("--t-max", type=float, dest="t_max",
+                        help="actuator saturation T_max in N m ('inf' for ideal actuators)")
+    parser.add_argument("--ground-scale", type=float, dest="ground_scale",
+                        help="factor on all four ground parameters (1.0 = 100 %%)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override any parameter by its dotted name, e.g. gait.velocity=0.8")
+
+
+def params_from_args(args: argparse.Namespace) -> HexapodParams:
+    """Load the params file and apply --t-max, --ground-scale and --set overrides."""
+    overrides: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise HexapodError(f"--set expects NAME=VALUE, got {item!r}")
+        overrides[name.strip()] = _parse_value(text.strip())
+    if args.t_max is not None:
+        overrides["actuator.t_max"] = args.t_max
+    if args.ground_scale is not None:
+        overrides["ground.scale"] = args.ground_scale
+    return load_params(args.params, **overrides)
+
+
+def _parse_value(text: str) -> Any:
+    import yaml
+
+    return yaml.safe_load(text)
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.6g}"
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from .core.indices import INDEX_NAMES, INDEX_UNITS
+    from .core.simulate import simulate
+
+    p = params_from_args(args)
+    controllers = [args.controller or p.run.controller] if args.controller != "both" else [
+        "pd_p", "pd_pf"]
+    results = {}
+    for c in controllers:
+        sim = simulate(p, c, args.duration)
+        if args.bag:
+            from .core.recording import write_run_bag
+
+            write_run_bag(sim.run, f"{args.bag}_{c}" if len(controllers) > 1 else args.bag)
+        results[c] = sim
+    if args.json:
+        doc = {c: {"status": s.outcome.status, "window_s": list(s.outcome.window),
+                   "t_max": p.actuator.t_max, "ground_scale": p.ground.scale,
+                   "indices": s.indices.as_dict() if s.indices else None}
+               for c, s in results.items()}
+        print(json.dumps(doc, indent=2, allow_nan=True))
+        return 0
+    print(f"T_max = {p.actuator.t_max:g} N m, ground = {100 * p.ground.scale:g} %, "
+          f"window = [{results[controllers[0]].outcome.window[0]:g}, "
+          f"{results[controllers[0]].outcome.window[1]:g}] s")
+    header = f"{'index':<8} {'unit':<12}" + "".join(f"{c:>14}" for c in controllers)
+    print(header)
+    for name in INDEX_NAMES + ("L",):
+        row = f"{name:<8} {INDEX_UNITS[name]:<12}"
+        for c in controllers:
+            idx = results[c].indices
+            row += f"{_fmt(getattr(idx, name)) if idx else 'diverged':>14}"
+        print(row)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser."""
+    parser = argparse.ArgumentParser(prog="hexapod", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("simulate", help="run the in-process engine (no ROS) and print indices")
+    params_arguments(sp)
+    sp.add_argument("--controller", choices=["pd_p", "pd_pf", "both"],
+                    help="controller (default: run.controller of the params file)")
+    sp.add_argument("--duration", type=float, help="simulated seconds (default run.duration)")
+    sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    sp.add_argument("--bag", help="also write the run as a rosbag2/MCAP bag to this directory")
+    sp.set_defaults(func=_cmd_simulate)
+    for name in COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as err:
+            if err.name != name:
+                raise
+            continue
+        mod.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: run a subcommand; project errors become one line and exit code 2."""
+    args = build_parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    np.seterr(all="ignore")
+    try:
+        return func(args)
+    except (HexapodError, ValueError, OSError) as err:
+        print(f"hexapod {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"hexapod {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

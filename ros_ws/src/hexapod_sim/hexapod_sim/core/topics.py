@@ -1,0 +1,107 @@
+"""The topic contract (graph.md "Topics") as data: names, joint-name lists, and the mapping
+between the engine's arrays and the (name, position, velocity, effort) columns of each
+``sensor_msgs/JointState`` topic. ROS-free: the nodes fill messages from these arrays, the
+in-process recorder writes the same columns as CDR, and the analysis reads them back.
+
+Every JointState topic fills all three arrays (an empty trailing float64[] is padded by
+rclpy's serializer in a way other readers reject, graph.md "Pitfalls").
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .layout import O_FF, O_FP, O_FV, O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ
+from .params import N_LEGS
+
+JOINT_STATES = "/hexapod/joint_states"
+FOOT_FORCES = "/hexapod/foot_forces"
+HIP_STATES = "/hexapod/hip_states"
+REFERENCE = "/hexapod/reference"
+JOINT_COMMANDS = "/hexapod/joint_commands"
+ACTIVE_CONTROLLER = "/hexapod/active_controller"
+INDICES = "/hexapod/indices"
+STATUS = "/hexapod/status"
+CLOCK = "/clock"
+MARKERS = "/hexapod/markers"
+
+JOINT_NAMES = tuple(f"leg{i + 1}_{j}" for i in range(N_LEGS) for j in ("hip", "knee"))
+FOOT_NAMES = tuple(f"leg{i + 1}_foot_{a}" for i in range(N_LEGS) for a in ("x", "y"))
+HIP_NAMES = tuple(f"leg{i + 1}_hip_{a}" for i in range(N_LEGS) for a in ("x", "y"))
+#: /hexapod/reference: joint references, then desired hip and foot Cartesian coordinates.
+REFERENCE_NAMES = JOINT_NAMES + HIP_NAMES + FOOT_NAMES
+
+#: Observation rows carried by each state topic as (position, velocity, effort).
+STATE_TOPICS = {
+    JOINT_STATES: (JOINT_NAMES, (O_TH, O_THV, O_TQ)),
+    FOOT_FORCES: (FOOT_NAMES, (O_FP, O_FV, O_FF)),
+    HIP_STATES: (HIP_NAMES, (O_HP, O_HV, O_HF)),
+}
+
+
+class Columns(NamedTuple):
+    """One JointState's payload: names and three equally long float arrays."""
+
+    names: tuple[str, ...]
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+def state_columns(obs: np.ndarray, topic: str) -> Columns:
+    """Columns of state ``topic`` from one observation (9, 6, 2); legs-major, 12 entries."""
+    names, (rp, rv, re) = STATE_TOPICS[topic]
+    return Columns(names, obs[rp].ravel(), obs[rv].ravel(), obs[re].ravel())
+
+
+def obs_from_columns(cols: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
+                     out: np.ndarray | None = None) -> np.ndarray:
+    """Rebuild observation array(s) (..., 9, 6, 2) from the three state topics' arrays.
+
+    ``cols[topic] = (position, velocity, effort)``, each (..., 12) in the contract's order.
+    """
+    lead = np.shape(next(iter(cols.values()))[0])[:-1]
+    if out is None:
+        out = np.empty(lead + (9, N_LEGS, 2))
+    for topic, (_, rows) in STATE_TOPICS.items():
+        for row, arr in zip(rows, cols[topic]):
+            out[..., row, :, :] = np.asarray(arr).reshape(lead + (N_LEGS, 2))
+    return out
+
+
+def reference_columns(theta: np.ndarray, theta_vel: np.ndarray, hip: np.ndarray,
+                      hip_vel: np.ndarray, foot: np.ndarray, foot_vel: np.ndarray) -> Columns:
+    """Columns of /hexapod/reference at one instant from (6, 2) arrays; effort is zero."""
+    pos = np.concatenate([theta.ravel(), hip.ravel(), foot.ravel()])
+    vel = np.concatenate([theta_vel.ravel(), hip_vel.ravel(), foot_vel.ravel()])
+    return Columns(REFERENCE_NAMES, pos, vel, np.zeros_like(pos))
+
+
+def split_reference(position: np.ndarray, velocity: np.ndarray) -> dict[str, np.ndarray]:
+    """Inverse of :func:`reference_columns` for arrays (..., 36): keys theta, theta_vel, hip,
+    hip_vel, foot, foot_vel, each (..., 6, 2)."""
+    lead = np.shape(position)[:-1]
+    shape = lead + (N_LEGS, 2)
+    out = {}
+    for k, key in enumerate(("theta", "hip", "foot")):
+        out[key] = np.asarray(position)[..., 12 * k:12 * (k + 1)].reshape(shape)
+        out[key + "_vel"] = np.asarray(velocity)[..., 12 * k:12 * (k + 1)].reshape(shape)
+    return out
+
+
+def command_columns(demand: np.ndarray) -> Columns:
+    """Columns of /hexapod/joint_commands: effort = demanded torque T_C (6, 2); position and
+    velocity are zero (filled so every reader accepts the message)."""
+    eff = np.asarray(demand, dtype=float).ravel()
+    return Columns(JOINT_NAMES, np.zeros_like(eff), np.zeros_like(eff), eff)
+
+
+def stamp_ns(t: float) -> int:
+    """Simulated time (s) -> integer nanoseconds, the stamp of every message of that tick."""
+    return int(round(t * 1e9))
+
+
+__all__ = [n for n in dir() if n.isupper()] + [
+    "Columns", "command_columns", "obs_from_columns", "reference_columns", "split_reference",
+    "stamp_ns", "state_columns"]

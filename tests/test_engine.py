@@ -1,0 +1,74 @@
+"""Closed loop: dt convergence, batch = one by one, determinism, divergence reporting."""
+import math
+
+import numpy as np
+import pytest
+
+from hexapod_control.core.closed_loop import Case, run
+from hexapod_metrics.core.indices import INDEX_NAMES
+from hexapod_metrics.core.simulate import evaluate_batch, simulate
+from hexapod_sim.core.params import load_params
+
+
+PD_PF_BOUNCE = pytest.mark.xfail(strict=True, reason=(
+    "PD-P&F's feet bounce at touchdown (force feedback on a stiff ground) and each bounce "
+    "stores a new touchdown point; how many bounces happen depends on dt, so its hip and "
+    "foot x errors are not dt-converged (0.027 vs 0.057 m). Documented in the README."))
+
+
+@pytest.mark.parametrize("controller", ["pd_p", pytest.param("pd_pf", marks=PD_PF_BOUNCE)])
+def test_base_indices_within_one_percent_of_half_dt(controller):
+    p = load_params()
+    full = simulate(p, controller).indices
+    half = simulate(p.with_values(**{"sim.dt": p.sim.dt / 2}), controller).indices
+    for name in INDEX_NAMES:
+        a, b = getattr(full, name), getattr(half, name)
+        assert abs(a - b) <= 0.01 * abs(b), f"{name}: dt {a:.6g} vs dt/2 {b:.6g}"
+
+
+def test_pd_pf_dynamic_indices_converge_in_dt():
+    """What does converge for PD-P&F: torque, force and vertical indices within 1.5 %."""
+    p = load_params()
+    full = simulate(p, "pd_pf").indices
+    half = simulate(p.with_values(**{"sim.dt": p.sim.dt / 2}), "pd_pf").indices
+    for name in ("E_av", "T_L", "F_L", "eps_yH", "eps_yF", "L"):
+        a, b = getattr(full, name), getattr(half, name)
+        assert abs(a - b) <= 0.015 * abs(b), f"{name}: dt {a:.6g} vs dt/2 {b:.6g}"
+
+
+def test_batch_equals_one_by_one():
+    p = load_params()
+    cases = [Case(p, "pd_p"), Case(p, "pd_pf"),
+             Case(p.with_values(**{"ground.scale": 0.3, "actuator.t_max": 170.0}), "pd_pf"),
+             Case(p.with_values(**{"ground.scale": 3.0, "actuator.t_max": math.inf}), "pd_p"),
+             Case(p.with_values(**{"pd_p.kp1": 30000.0}), "pd_p")]
+    batch = evaluate_batch(cases, 3.0)
+    for c, b in zip(cases, batch):
+        one = simulate(c.params, c.controller, 3.0)
+        assert b.status == one.outcome.status == "ok"
+        assert b.window == one.outcome.window
+        for name in INDEX_NAMES + ("L",):
+            assert getattr(b.indices, name) == pytest.approx(getattr(one.indices, name),
+                                                             rel=1e-12, abs=1e-15)
+
+
+def test_runs_are_deterministic():
+    p = load_params()
+    a, b = run(p, "pd_pf", 1.0), run(p, "pd_pf", 1.0)
+    np.testing.assert_array_equal(a.obs, b.obs)
+
+
+def test_divergence_is_reported_not_scored():
+    p = load_params(**{"body.k_x": 1e11})  # explicit body springs: omega dt ~ 8
+    single = simulate(p, "pd_pf")
+    assert single.outcome.status == "diverged" and single.indices is None
+    assert single.run.diverged_at is not None and single.run.diverged_at < 3.0
+    batch = evaluate_batch([Case(p, "pd_pf"), Case(load_params(), "pd_pf")], 3.0)
+    assert [o.status for o in batch] == ["diverged", "ok"]
+    assert batch[0].indices is None and batch[1].indices is not None
+
+
+def test_walks_forward_at_commanded_speed():
+    p = load_params()
+    idx = simulate(p, "pd_pf").indices
+    assert idx.L == pytest.approx(p.gait.velocity * p.cycle_time, rel=0.1)

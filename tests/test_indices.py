@@ -1,0 +1,70 @@
+"""Indices on synthetic signals whose values are known in closed form."""
+import numpy as np
+import pytest
+
+from hexapod_metrics.core.indices import compute_indices, evaluation_window
+from hexapod_sim.core.errors import ParameterError
+from hexapod_sim.core.params import load_params
+
+
+def _window(n=1000, dt=1e-3):
+    t = np.arange(n + 1) * dt
+    hip = np.zeros((n + 1, 6, 2))
+    hip[..., 0] = t[:, None] * 2.0         # walks 2 m in 1 s
+    hip[..., 1] = 1.8
+    return t, hip
+
+
+def test_constant_signals():
+    n, dt = 1000, 1e-3
+    t, hip = _window(n, dt)
+    torque = np.full((n + 1, 6, 2), 2.0)
+    vel = np.full((n + 1, 6, 2), -3.0)
+    force = np.tile([3.0, 4.0], (n + 1, 6, 1))
+    hip_ref = hip.copy()
+    hip_ref[..., 0] += 0.1
+    foot = np.zeros((n + 1, 6, 2))
+    foot_ref = foot.copy()
+    foot_ref[..., 1] -= 0.05
+    idx = compute_indices(torque, vel, force, hip, hip_ref, foot, foot_ref, dt)
+    assert idx.L == pytest.approx(2.0)
+    assert idx.E_av == pytest.approx(12 * 6.0 * 1.0 / 2.0)     # 12 joints x |2*-3| x 1 s / 2 m
+    assert idx.T_L == pytest.approx(np.sqrt(12 * 4.0 * 1.0) / 2.0)
+    assert idx.F_L == pytest.approx(np.sqrt(6 * 25.0 * 1.0) / 2.0)
+    assert idx.eps_xH == pytest.approx(0.6) and idx.eps_yH == 0.0
+    assert idx.eps_xF == 0.0 and idx.eps_yF == pytest.approx(0.3)
+
+
+def test_sinusoidal_errors_and_power():
+    n, dt = 1000, 1e-3
+    t, hip = _window(n, dt)
+    w = 2 * np.pi                       # one full period over the window
+    torque = np.zeros((n + 1, 6, 2))
+    vel = np.zeros((n + 1, 6, 2))
+    torque[:, 0, 0] = 10 * np.sin(w * t)
+    vel[:, 0, 0] = 2 * np.sin(w * t)    # power 20 sin^2 >= 0: energy = 20 * 0.5 * 1 s
+    hip_ref = hip.copy()
+    hip_ref[:, 2, 1] += 0.3 * np.sin(w * t)
+    zeros = np.zeros((n + 1, 6, 2))
+    idx = compute_indices(torque, vel, zeros, hip, hip_ref, zeros, zeros, dt)
+    assert idx.E_av == pytest.approx(20 * 0.5 / 2.0, rel=1e-9)
+    assert idx.T_L == pytest.approx(np.sqrt(100 * 0.5) / 2.0, rel=1e-9)
+    assert idx.eps_yH == pytest.approx(0.3 / np.sqrt(2), rel=1e-9)
+    assert idx.F_L == 0.0
+
+
+def test_first_sample_only_sets_the_start():
+    n, dt = 10, 0.1
+    t, hip = _window(n, dt)
+    torque = np.zeros((n + 1, 6, 2))
+    torque[0] = 1e6                      # ignored: it belongs to the previous window
+    z = np.zeros((n + 1, 6, 2))
+    assert compute_indices(torque, z + 1, z, hip, hip, z, z, dt).E_av == 0.0
+
+
+def test_evaluation_window():
+    p = load_params()
+    assert evaluation_window(p, 3.0) == (2.0, 3.0)
+    assert evaluation_window(p, 3.5) == (2.0, 3.0)
+    with pytest.raises(ParameterError, match="run.duration"):
+        evaluation_window(p, 0.5)
