@@ -18,13 +18,19 @@ from numba import njit
 
 @njit(cache=True)
 def leg_terms(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav):  # type: ignore[no-untyped-def]
-    """Mass matrix and bias of one leg.
+    """Mass matrix and bias of one leg at joint angles (th1, th2): see :func:`leg_terms_cs`."""
+    return leg_terms_cs(np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2),
+                        w1, w2, l1, l2, mh, mk, mf, grav)
+
+
+@njit(cache=True, error_model="numpy")
+def leg_terms_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf,  # type: ignore[no-untyped-def]
+                 grav):
+    """Mass matrix and bias of one leg, given cos/sin of theta1 and of theta1 + theta2.
 
     Returns (m, H02, H03, H12, H13, H22, H23, H33, b0, b1, b2, b3) where H00 = H11 = m
     (the leg's total mass), H01 = 0, and b = c + g (N, N, N m, N m).
     """
-    c1, s1 = np.cos(th1), np.sin(th1)
-    c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
     a1, b1 = l1 * c1, l1 * s1          # d p_K / d theta1
     a2, b2 = l2 * c12, l2 * s12        # d p_F / d theta2
     af, bf = a1 + a2, b1 + b2          # d p_F / d theta1
@@ -47,7 +53,7 @@ def leg_terms(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav):  # type: ignore[no-un
     return m, h02, h03, h12, h13, h22, h23, h33, bias0, bias1, bias2, bias3
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore[no-untyped-def]
                r0, r1, r2, r3):
     """Solve A x = r for a symmetric positive definite 4x4 A (upper triangle given), by LDL^T."""
@@ -75,7 +81,15 @@ def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore
 @njit(cache=True)
 def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ignore[no-untyped-def]
               fhx, fhy, ffx, ffy, bx, by, h):
-    """ddq of one leg from H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF (paper eq. 5).
+    """ddq of one leg at joint angles (th1, th2): see :func:`leg_accel_cs`."""
+    return leg_accel_cs(np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2),
+                        w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h)
+
+
+@njit(cache=True, error_model="numpy")
+def leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ignore[no-untyped-def]
+                 tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h):
+    """ddq of one leg (cos/sin of theta1 and theta1 + theta2 given) from H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF (paper eq. 5).
 
     tm1, tm2: joint torques (N m); (fhx, fhy): body force on the hip (N); (ffx, ffy): ground
     force on the foot at the current velocity (N). (bx, by) (N s/m) and h (s): ground damping
@@ -83,10 +97,10 @@ def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ign
     (H + h J_F^T B J_F) ddq = rhs. h = 0 is the plain explicit solve.
     Returns (ddx_H, ddy_H, ddtheta1, ddtheta2).
     """
-    m, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms(
-        th1, th2, w1, w2, l1, l2, mh, mk, mf, grav)
-    a2, b2 = l2 * np.cos(th1 + th2), l2 * np.sin(th1 + th2)
-    af, bf = l1 * np.cos(th1) + a2, l1 * np.sin(th1) + b2
+    m, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms_cs(
+        c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav)
+    a2, b2 = l2 * c12, l2 * s12
+    af, bf = l1 * c1 + a2, l1 * s1 + b2
     # J_F = [[1, 0, af, a2], [0, 1, bf, b2]]; D = h J_F^T diag(bx, by) J_F
     hx, hy = h * bx, h * by
     return solve_spd4(
@@ -113,4 +127,5 @@ def bias_forces(q: np.ndarray, dq: np.ndarray, l1: float, l2: float, mh: float, 
     return np.array(leg_terms(q[2], q[3], dq[2], dq[3], l1, l2, mh, mk, mf, grav)[8:])
 
 
-__all__ = ["bias_forces", "leg_accel", "leg_terms", "mass_matrix", "solve_spd4"]
+__all__ = ["bias_forces", "leg_accel", "leg_accel_cs", "leg_terms", "leg_terms_cs", "mass_matrix",
+           "solve_spd4"]

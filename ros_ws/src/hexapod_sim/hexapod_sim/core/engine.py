@@ -24,10 +24,10 @@ from numba import njit
 
 from .body import body_forces
 from .contact import limit_force, update_contact
-from .dynamics import leg_accel
+from .dynamics import leg_accel_cs
 from .errors import DivergenceError
 from .gait import reference
-from .kinematics import foot_offset
+from .kinematics import foot_offset_cs, foot_velocity_cs
 from .layout import (C0, O_FF, O_FP, O_FV, O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ,
                      OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL, P_KBX,
                      P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
@@ -39,38 +39,37 @@ MAX_COORD = 1e4
 MAX_RATE = 1e4
 
 
-@njit(cache=True)
-def leg_contact_accel(th1, th2, w1, w2, P, tm1, tm2, fhx, fhy, x, y, vx, vy, x_touch, h):  # type: ignore[no-untyped-def]
+@njit(cache=True, error_model="numpy")
+def leg_contact_accel(c1, s1, c12, s12, w1, w2, P, tm1, tm2, fhx, fhy,  # type: ignore[no-untyped-def]
+                      x, y, vx, vy, x_touch, h):
     """Accelerations of a leg whose foot is in contact, and the ground force it feels.
 
-    The spring terms use the current position; the damping terms the velocity at the end of
-    the step of length h (h = 0: the current velocity, i.e. plain semi-implicit Euler). The
-    force is then limited ("the ground never pulls"; Coulomb if mu > 0) and, if a limit
-    applies, the leg is solved again with the limited force held fixed.
-    Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
+    c1, s1, c12, s12: cos/sin of theta1 and theta1 + theta2. The spring terms use the current
+    position; the damping terms the velocity at the end of the step of length h (h = 0: the
+    current velocity, i.e. plain semi-implicit Euler). The force is then limited ("the ground
+    never pulls"; Coulomb if mu > 0) and, if a limit applies, the leg is solved again with the
+    limited force held fixed. Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
     """
     l1, l2 = P[P_L1], P[P_L2]
     bx, by = P[P_BGX], P[P_BGY]
     fx = -P[P_KGX] * (x - x_touch) - bx * vx
     fy = -P[P_KGY] * y - by * vy
-    a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF], P[P_G],
-                               tm1, tm2, fhx, fhy, fx, fy, bx, by, h)
+    a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF],
+                                  P[P_G], tm1, tm2, fhx, fhy, fx, fy, bx, by, h)
     if h > 0.0:
         # end-of-step foot velocity change: J_F ddq h
-        c1, s1 = np.cos(th1), np.sin(th1)
-        c12, s12 = np.cos(th1 + th2), np.sin(th1 + th2)
         dvx = h * (a0 + (l1 * c1 + l2 * c12) * a2 + l2 * c12 * a3)
         dvy = h * (a1 + (l1 * s1 + l2 * s12) * a2 + l2 * s12 * a3)
         fx -= bx * dvx
         fy -= by * dvy
     lx, ly = limit_force(fx, fy, P[P_MU])
     if lx != fx or ly != fy:
-        a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF], P[P_G],
-                                   tm1, tm2, fhx, fhy, lx, ly, 0.0, 0.0, 0.0)
+        a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK],
+                                      P[P_MF], P[P_G], tm1, tm2, fhx, fhy, lx, ly, 0.0, 0.0, 0.0)
     return a0, a1, a2, a3, lx, ly
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
     """Forces and accelerations at state ``s`` under joint torques ``torque`` (6, 2) (N m).
 
@@ -83,25 +82,24 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
     h = P[P_DT] if P[P_IMPL] != 0.0 else 0.0
     body_forces(q, dq, P[P_HIPX:P_HIPX + N_LEGS], P[P_KBX], P[P_KBY], P[P_BBX], P[P_BBY], fh)
     for i in range(N_LEGS):
-        th1, th2, w1, w2 = q[i, 2], q[i, 3], dq[i, 2], dq[i, 3]
-        dx, dy = foot_offset(th1, th2, l1, l2)
+        th1, th12, w1, w2 = q[i, 2], q[i, 2] + q[i, 3], dq[i, 2], dq[i, 3]
+        c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th12), np.sin(th12)
+        dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
         x, y = q[i, 0] + dx, q[i, 1] + dy
         c, xt = update_contact(x, y, s[C0 + i], s[X0 + i])
         s[C0 + i] = c
         s[X0 + i] = xt
         if c != 0.0:
-            # foot velocity = hip velocity + J_F,theta dtheta (J_F,theta = -J, kinematics.py)
-            w12 = w1 + w2
-            vx = dq[i, 0] + l1 * np.cos(th1) * w1 + l2 * np.cos(th1 + th2) * w12
-            vy = dq[i, 1] + l1 * np.sin(th1) * w1 + l2 * np.sin(th1 + th2) * w12
-            a0, a1, a2, a3, fx, fy = leg_contact_accel(th1, th2, w1, w2, P, torque[i, 0],
-                                                       torque[i, 1], fh[i, 0], fh[i, 1], x, y,
-                                                       vx, vy, xt, h)
+            dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
+            vx, vy = dq[i, 0] + dvx, dq[i, 1] + dvy
+            a0, a1, a2, a3, fx, fy = leg_contact_accel(c1, s1, c12, s12, w1, w2, P,
+                                                       torque[i, 0], torque[i, 1], fh[i, 0],
+                                                       fh[i, 1], x, y, vx, vy, xt, h)
         else:
             fx, fy = 0.0, 0.0
-            a0, a1, a2, a3 = leg_accel(th1, th2, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF],
-                                       P[P_G], torque[i, 0], torque[i, 1], fh[i, 0], fh[i, 1],
-                                       0.0, 0.0, 0.0, 0.0, 0.0)
+            a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK],
+                                          P[P_MF], P[P_G], torque[i, 0], torque[i, 1],
+                                          fh[i, 0], fh[i, 1], 0.0, 0.0, 0.0, 0.0, 0.0)
         ff[i, 0] = fx
         ff[i, 1] = fy
         qdd[i, 0] = a0
@@ -153,14 +151,14 @@ def observe(s, torque_held, P, obs):  # type: ignore[no-untyped-def]
         xh, yh, th1, th2 = s[Q0 + 4 * i], s[Q0 + 4 * i + 1], s[Q0 + 4 * i + 2], s[Q0 + 4 * i + 3]
         vxh, vyh = s[V0 + 4 * i], s[V0 + 4 * i + 1]
         w1, w2 = s[V0 + 4 * i + 2], s[V0 + 4 * i + 3]
-        dx, dy = foot_offset(th1, th2, l1, l2)
-        w12 = w1 + w2
+        c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2)
+        dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
+        dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
         obs[O_TH, i, 0], obs[O_TH, i, 1] = th1, th2
         obs[O_THV, i, 0], obs[O_THV, i, 1] = w1, w2
         obs[O_TQ, i, 0], obs[O_TQ, i, 1] = torque_held[i, 0], torque_held[i, 1]
         obs[O_FP, i, 0], obs[O_FP, i, 1] = xh + dx, yh + dy
-        obs[O_FV, i, 0] = vxh + l1 * np.cos(th1) * w1 + l2 * np.cos(th1 + th2) * w12
-        obs[O_FV, i, 1] = vyh + l1 * np.sin(th1) * w1 + l2 * np.sin(th1 + th2) * w12
+        obs[O_FV, i, 0], obs[O_FV, i, 1] = vxh + dvx, vyh + dvy
         obs[O_FF, i, 0], obs[O_FF, i, 1] = ff[i, 0], ff[i, 1]
         obs[O_HP, i, 0], obs[O_HP, i, 1] = xh, yh
         obs[O_HV, i, 0], obs[O_HV, i, 1] = vxh, vyh

@@ -29,7 +29,20 @@ def knee_offset(th1, l1):  # type: ignore[no-untyped-def]
 def foot_offset(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
     """Foot minus hip, (dx, dy) in m; equals -Psi(theta)."""
     a = th1 + th2
-    return l1 * np.sin(th1) + l2 * np.sin(a), -l1 * np.cos(th1) - l2 * np.cos(a)
+    return foot_offset_cs(np.cos(th1), np.sin(th1), np.cos(a), np.sin(a), l1, l2)
+
+
+@njit(cache=True)
+def foot_offset_cs(c1, s1, c12, s12, l1, l2):  # type: ignore[no-untyped-def]
+    """Foot minus hip (m) from cos/sin of theta1 and of theta1 + theta2."""
+    return l1 * s1 + l2 * s12, -l1 * c1 - l2 * c12
+
+
+@njit(cache=True)
+def foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2):  # type: ignore[no-untyped-def]
+    """Foot velocity relative to the hip (m/s): J_F,theta dtheta = -J dtheta."""
+    w12 = w1 + w2
+    return l1 * c1 * w1 + l2 * c12 * w12, l1 * s1 * w1 + l2 * s12 * w12
 
 
 @njit(cache=True)
@@ -90,5 +103,6 @@ def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float
     return th1, th2
 
 
-__all__ = ["foot_force_torque", "foot_offset", "inverse_kinematics", "joint_rates",
+__all__ = ["foot_force_torque", "foot_offset", "foot_offset_cs", "foot_velocity_cs",
+           "inverse_kinematics", "joint_rates",
            "knee_offset", "psi", "psi_jacobian"]
