@@ -1,0 +1,197 @@
+"""Subcommands `sweep`, `tune` and `reproduce` (and `analyze`, `animate` from their modules)."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .cli import params_arguments, params_from_args
+from .core.indices import INDEX_NAMES
+
+
+def progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]]:
+    """A tqdm bar per labelled piece of work, on stderr (silent when disabled)."""
+    def make(label: str, total: int) -> Callable[[int], None]:
+        if not enabled:
+            return lambda n: None
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=label, unit="run", file=sys.stderr, leave=True,
+                   dynamic_ncols=True)
+
+        def update(n: int) -> None:
+            bar.update(n)
+            if bar.n >= total:
+                bar.close()
+        return update
+    return make
+
+
+def _backend_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", choices=["processes", "inline", "dask"], default=None,
+                        help="where runs execute (default: local processes; dask if --dask)")
+    parser.add_argument("--dask", metavar="ADDRESS",
+                        help="scheduler address of an existing Dask cluster (tcp://host:port)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _backend(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from .core.parallel import make_backend
+
+    name = args.backend or ("dask" if args.dask else "processes")
+    return make_backend(name, args.dask)
+
+
+def _floats(text: str) -> list[float]:
+    """'10:1000:21' (log-spaced), 'a:b:n:lin', or a comma list."""
+    if ":" in text:
+        parts = text.split(":")
+        lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
+        if len(parts) > 3 and parts[3] == "lin":
+            return [float(v) for v in np.linspace(lo, hi, n)]
+        if lo <= 0 or hi <= 0:
+            raise ValueError(f"log-spaced range {text!r} needs positive ends (or add ':lin')")
+        return [float(v) for v in np.geomspace(lo, hi, n)]
+    return [float(v) for v in text.split(",") if v.strip()]
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from . import plots
+    from .core.experiments import ground_sweep, t_max_sweep
+
+    if args.range is None:
+        args.range = "10:1000:21" if args.kind == "ground" else "100:400:13:lin"
+    p = params_from_args(args)
+    backend = _backend(args)
+    prog = progress_factory(not args.no_progress)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    controllers = tuple(args.controllers.split(","))
+    results = []
+    if args.kind == "ground":
+        for t_max in _floats(args.t_max_list):
+            n = len(_floats(args.range)) * len(controllers)
+            res = ground_sweep(p, _floats(args.range), t_max, controllers=controllers,
+                               backend=backend, progress=prog(f"ground sweep T_max {t_max:g}", n))
+            results.append((f"ground_tmax{t_max:g}", res, 100.0,
+                            "% of base ground (K_x, K_y, B_x, B_y)", True))
+    else:
+        vals = _floats(args.range)
+        res = t_max_sweep(p, vals, p.ground.scale, controllers=controllers, backend=backend,
+                          progress=prog("T_max sweep", len(vals) * len(controllers)))
+        results.append(("tmax", res, 1.0, "T_max (N m)", False))
+    for tag, res, xs, xl, logx in results:
+        rows = res.rows()
+        with (out / f"sweep_{tag}.csv").open("w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        (out / f"sweep_{tag}.json").write_text(json.dumps(rows, indent=1, default=float))
+        for name in INDEX_NAMES:
+            plots.sweep_plot(res, (name,), out / f"sweep_{tag}_{name}.png",
+                             f"{name}: {tag}", x_scale=xs, x_label=xl, log_x=logx)
+        print(f"{res.variable} sweep ({', '.join(f'{k}={v:g}' for k, v in res.fixed.items())})")
+        print(f"{'value':>10} {'controller':>10} " + " ".join(f"{n:>10}" for n in INDEX_NAMES))
+        for r in rows:
+            vals = " ".join(f"{r[n]:>10.4g}" if not math.isnan(r[n]) else f"{'diverged':>10}"
+                            for n in INDEX_NAMES)
+            print(f"{r[res.variable] * xs:>10.4g} {r['controller']:>10} {vals}")
+    print(f"results and plots in {out}")
+    return 0
+
+
+def _cmd_tune(args: argparse.Namespace) -> int:
+    from .core.experiments import default_grid, tune
+
+    p = params_from_args(args)
+    grid = default_grid(p, args.controller, _floats(args.factors))
+    for item in args.grid:
+        name, _, values = item.partition("=")
+        grid[name.strip()] = _floats(values)
+    total = int(np.prod([len(v) for v in grid.values()])) + 1
+    res = tune(p, args.controller, grid, backend=_backend(args),
+               progress=progress_factory(not args.no_progress)(f"tuning {args.controller}", total))
+    print(f"{args.controller}: {len(res.gains)} gain sets, {res.rejected_diverged} diverged, "
+          f"{res.rejected_not_walking} not walking (rejected)")
+    print("best:      " + ", ".join(f"{k}={v:.6g}" for k, v in res.best.items()) +
+          f"  eps_xH+eps_yH = {res.best_score:.5g} m")
+    print("params file: " + ", ".join(f"{k}={v:.6g}" for k, v in res.reference.items()) +
+          f"  eps_xH+eps_yH = {res.reference_score:.5g} m")
+    print(f"the best set beats the params file's gains by {100 * res.improvement:.3g} %")
+    if args.json:
+        Path(args.json).write_text(json.dumps({
+            "controller": args.controller, "grid": res.grid, "best": res.best,
+            "best_score": res.best_score, "reference": res.reference,
+            "reference_score": res.reference_score,
+            "rejected_diverged": res.rejected_diverged,
+            "rejected_not_walking": res.rejected_not_walking,
+            "all": [{"gains": g, "score": None if math.isnan(s) else s,
+                     "status": o.status} for g, o, s in zip(res.gains, res.outcomes,
+                                                             res.scores)]}, indent=1))
+    return 0
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from .report import Plan, reproduce
+
+    p = params_from_args(args)
+    plan = Plan.quick() if args.quick else Plan()
+    verdicts = reproduce(p, Path(args.out), _backend(args), plan,
+                         progress_factory(not args.no_progress))
+    for v in verdicts:
+        print(f"{v.claim} {'holds' if v.holds else 'FAILS'}: {v.statement}")
+        print(f"    {v.evidence}")
+    print(f"report written to {Path(args.out) / 'README.md'}")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register sweep, tune, reproduce (and analyze/animate when present)."""
+    sp = sub.add_parser("sweep", help="ground or T_max sweep for both controllers (E2-E4)")
+    params_arguments(sp)
+    sp.add_argument("kind", choices=["ground", "tmax"], help="what to sweep")
+    sp.add_argument("--range", default=None,
+                    help="values: 'lo:hi:n' log-spaced, 'lo:hi:n:lin', or 'a,b,c'; ground in "
+                    "%% (default 10:1000:21), T_max in N m (default 100:400:13:lin)")
+    sp.add_argument("--t-max-list", default="400,170", dest="t_max_list",
+                    help="ground sweep: T_max values, one sweep each (default 400,170)")
+    sp.add_argument("--controllers", default="pd_p,pd_pf")
+    sp.add_argument("--out", default="sweeps", help="output directory (CSV, JSON, PNG)")
+    _backend_args(sp)
+    sp.set_defaults(func=_cmd_sweep)
+
+    tp = sub.add_parser("tune", help="brute-force gain search (E5)")
+    params_arguments(tp)
+    tp.add_argument("--controller", choices=["pd_p", "pd_pf"], required=True)
+    tp.add_argument("--factors", default="0.5,0.75,1,1.5,2",
+                    help="default grid: each gain of the params file times these factors")
+    tp.add_argument("--grid", action="append", default=[], metavar="GAIN=VALUES",
+                    help="explicit values for one gain, e.g. kp1=5000:160000:16")
+    tp.add_argument("--json", help="write every evaluated set to this JSON file")
+    _backend_args(tp)
+    tp.set_defaults(func=_cmd_tune)
+
+    rp = sub.add_parser("reproduce", help="run E1-E5 and write the report")
+    params_arguments(rp)
+    rp.add_argument("--out", default="report", help="report directory (default report/)")
+    rp.add_argument("--quick", action="store_true", help="a few points per experiment")
+    _backend_args(rp)
+    rp.set_defaults(func=_cmd_reproduce)
+
+    for name in ("analyze", "animate"):
+        try:
+            mod = __import__(f"hexapod_metrics.cmd_{name}", fromlist=["add_parser"])
+        except ModuleNotFoundError as err:
+            if err.name != f"hexapod_metrics.cmd_{name}":
+                raise
+            continue
+        mod.add_parser(sub)
+
+
+__all__ = ["add_parser", "progress_factory"]
