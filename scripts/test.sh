@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Run the whole test suite: set up what is missing, then pytest over tests/ and
+# each package's own test/ directory. Extra arguments go to pytest (naming a
+# test path runs only that); the exit code is pytest's.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+"$root/scripts/setup.sh"
+# shellcheck source=scripts/env.sh
+source "$root/scripts/env.sh"
+# Default targets (absolute: relative arguments stay relative to the caller's
+# cwd), unless an argument already names a test path.
+dirs=("$root/tests")
+for d in "$root"/ros_ws/src/*/test; do
+  if [[ -d "$d" ]]; then dirs+=("$d"); fi
+done
+for arg in "$@"; do
+  if [[ "$arg" != -* && -e "${arg%%::*}" ]]; then dirs=(); break; fi
+done
+exec python -m pytest --rootdir "$root" -q "${dirs[@]}" "$@"
