@@ -1,0 +1,111 @@
+"""What a bag of this project holds, and writing an in-process run in exactly that format.
+
+:data:`TOPICS` is the one table of recorded topics (type and offered QoS) shared by the
+metrics node and ``hexapod simulate --bag``; the analysis reads either kind of bag.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from hexapod_control.core.closed_loop import RunResult
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.layout import O_HP
+from hexapod_sim.core.params import HexapodParams, from_flat
+
+from .bag_writer import BagWriter
+from .cdr import DiagnosticStatus
+from .indices import INDEX_NAMES, Indices, indices_from_obs
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+PARAMS_KEY = "hexapod_params"
+#: topic -> (message type, offered QoS preset of bag_writer.QOS_PRESETS)
+TOPICS: dict[str, tuple[str, str]] = {
+    T.CLOCK: ("rosgraph_msgs/msg/Clock", "reliable"),
+    T.JOINT_STATES: (JOINT_STATE, "reliable"),
+    T.FOOT_FORCES: (JOINT_STATE, "reliable"),
+    T.HIP_STATES: (JOINT_STATE, "reliable"),
+    T.REFERENCE: (JOINT_STATE, "reliable"),
+    T.JOINT_COMMANDS: (JOINT_STATE, "reliable"),
+    T.ACTIVE_CONTROLLER: ("std_msgs/msg/String", "transient_local"),
+    T.INDICES: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
+    T.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
+}
+
+
+def bag_custom_data(p: HexapodParams, source: str) -> dict[str, str]:
+    """metadata.yaml custom_data of our bags: who wrote it and every parameter (JSON)."""
+    return {"source": source, PARAMS_KEY: json.dumps(p.to_flat())}
+
+
+def params_from_custom_data(custom: dict[str, str] | None) -> HexapodParams | None:
+    """The parameters recorded in a bag's custom_data, or None if it has none."""
+    if not custom or PARAMS_KEY not in custom:
+        return None
+    return from_flat(json.loads(custom[PARAMS_KEY]))
+
+
+def indices_status(idx: Indices, controller: str, cycle: int, t_a: float,
+                   t_b: float) -> DiagnosticStatus:
+    """One /hexapod/indices status: the seven indices of gait cycle ``cycle`` (and L)."""
+    values = tuple((n, repr(float(getattr(idx, n)))) for n in INDEX_NAMES + ("L",))
+    values += (("controller", controller), ("cycle", str(cycle)), ("t_a", repr(t_a)),
+               ("t_b", repr(t_b)))
+    return DiagnosticStatus(name=f"hexapod/indices/{controller}", message=f"cycle {cycle}",
+                            hardware_id="hexapod", level=0, values=values)
+
+
+def status_indices(status: DiagnosticStatus) -> tuple[Indices, dict[str, str]]:
+    """Inverse of :func:`indices_status`: the indices and the other key/values."""
+    kv = dict(status.values)
+    idx = Indices(**{n: float(kv.pop(n)) for n in INDEX_NAMES + ("L",)})
+    return idx, kv
+
+
+def write_run_bag(run: RunResult, path: str | Path) -> Path:
+    """Write an in-process run as the graph would record it (every tick of every topic).
+
+    Log time = stamp = simulated time. The command of tick k answers the state of tick k;
+    the per-cycle indices are published at the end of each full gait cycle.
+    """
+    path = Path(path)
+    p = run.params
+    ref = run.reference
+    n_ticks = run.command.shape[0]
+    ticks_per_cycle = int(round(p.cycle_time / p.sim.control_period))
+    with BagWriter(path, custom_data=bag_custom_data(p, "hexapod simulate")) as bag:
+        for name, (msgtype, qos) in TOPICS.items():
+            if name != T.STATUS:
+                bag.add_topic(name, msgtype, qos)
+        bag.write_string(T.ACTIVE_CONTROLLER, 0, run.controller)
+        last = n_ticks if run.diverged_at is None else int(round(
+            run.diverged_at / p.sim.control_period))
+        for k in range(last + 1):
+            stamp = T.stamp_ns(run.t[k])
+            obs = run.obs[k]
+            bag.write_clock(T.CLOCK, stamp)
+            for topic in T.STATE_TOPICS:
+                c = T.state_columns(obs, topic)
+                bag.write_joint_state(topic, stamp, c.names, c.position, c.velocity, c.effort,
+                                      frame_id=run.controller if topic == T.JOINT_STATES else "")
+            c = T.reference_columns(ref.theta[k], ref.theta_vel[k], ref.hip[k], ref.hip_vel[k],
+                                    ref.foot[k], ref.foot_vel[k])
+            bag.write_joint_state(T.REFERENCE, stamp, c.names, c.position, c.velocity, c.effort)
+            if k < last:
+                c = T.command_columns(run.command[k])
+                bag.write_joint_state(T.JOINT_COMMANDS, stamp, c.names, c.position, c.velocity,
+                                      c.effort, frame_id=run.controller)
+            if k > 0 and k % ticks_per_cycle == 0 and np.isfinite(run.obs[k, O_HP]).all():
+                sl = slice(k - ticks_per_cycle, k + 1)
+                idx = indices_from_obs(run.obs[sl], ref.hip[sl], ref.foot[sl],
+                                       p.sim.control_period)
+                st = indices_status(idx, run.controller, k // ticks_per_cycle - 1,
+                                    float(run.t[sl.start]), float(run.t[k]))
+                bag.write_diagnostic_array(T.INDICES, stamp, [st])
+    return path
+
+
+__all__ = ["PARAMS_KEY", "TOPICS", "bag_custom_data", "indices_status", "params_from_custom_data",
+           "status_indices", "write_run_bag"]
