@@ -68,3 +68,20 @@ def test_evaluation_window():
     assert evaluation_window(p, 3.5) == (2.0, 3.0)
     with pytest.raises(ParameterError, match="run.duration"):
         evaluation_window(p, 0.5)
+
+
+def test_window_sums_add_up_over_consecutive_windows():
+    from hexapod_metrics.core.indices import window_sums
+
+    rng = np.random.default_rng(2)
+    n, dt = 200, 1e-3
+    t, hip = _window(n, dt)
+    arrays = [rng.normal(size=(n + 1, 6, 2)) for _ in range(3)]
+    hip_ref = hip + rng.normal(scale=0.01, size=hip.shape)
+    foot, foot_ref = rng.normal(size=(2, n + 1, 6, 2))
+    whole = compute_indices(*arrays, hip, hip_ref, foot, foot_ref, dt)
+    parts = [window_sums(*(a[sl] for a in arrays), hip[sl], hip_ref[sl], foot[sl],
+                         foot_ref[sl], dt) for sl in (slice(0, 81), slice(80, 201))]
+    joined = (parts[0] + parts[1]).indices()
+    for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF", "L"):
+        assert getattr(joined, name) == pytest.approx(getattr(whole, name), rel=1e-12)

@@ -48,9 +48,50 @@ class Indices:
         return asdict(self)
 
 
-def _rms_sum(desired: np.ndarray, actual: np.ndarray) -> float:
-    """sum over legs of the RMS of (desired - actual) over samples; arrays (N, 6)."""
-    return float(np.sum(np.sqrt(np.mean((desired - actual) ** 2, axis=0))))
+@dataclass(frozen=True)
+class WindowSums:
+    """The additive parts of the indices over a window: consecutive windows add up.
+
+    energy = sum |T theta_dot| dt; torque2 = sum T^2 dt; force2 = sum |f|^2 dt (all legs and
+    joints); sq_err (4, 6) = per-leg sums of squared errors of x_H, y_H, x_F, y_F; samples =
+    N_S; distance = L.
+    """
+
+    energy: float
+    torque2: float
+    force2: float
+    sq_err: np.ndarray
+    samples: int
+    distance: float
+
+    def __add__(self, other: "WindowSums") -> "WindowSums":
+        return WindowSums(self.energy + other.energy, self.torque2 + other.torque2,
+                          self.force2 + other.force2, self.sq_err + other.sq_err,
+                          self.samples + other.samples, self.distance + other.distance)
+
+    def indices(self) -> Indices:
+        """Eqs. (8)-(11) from the sums."""
+        dist = self.distance
+        rms = np.sqrt(self.sq_err / self.samples).sum(axis=1)
+        return Indices(self.energy / dist, float(np.sqrt(self.torque2)) / dist,
+                       float(np.sqrt(self.force2)) / dist, float(rms[0]), float(rms[1]),
+                       float(rms[2]), float(rms[3]), dist)
+
+
+def window_sums(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
+                hip_pos: np.ndarray, hip_ref: np.ndarray, foot_pos: np.ndarray,
+                foot_ref: np.ndarray, dt: float) -> WindowSums:
+    """:class:`WindowSums` of (N+1, 6, 2) sample arrays (row 0 only supplies x_iH(t_a))."""
+    if hip_pos.shape[0] < 2:
+        raise ValueError("an evaluation window needs at least two samples")
+    tq, w, f = torque[1:], joint_vel[1:], hip_force[1:]
+    err_h = hip_ref[1:] - hip_pos[1:]
+    err_f = foot_ref[1:] - foot_pos[1:]
+    sq = np.stack([np.sum(err_h[..., 0] ** 2, axis=0), np.sum(err_h[..., 1] ** 2, axis=0),
+                   np.sum(err_f[..., 0] ** 2, axis=0), np.sum(err_f[..., 1] ** 2, axis=0)])
+    return WindowSums(float(np.sum(np.abs(tq * w)) * dt), float(np.sum(tq * tq) * dt),
+                      float(np.sum(f * f) * dt), sq, hip_pos.shape[0] - 1,
+                      float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0])))
 
 
 def compute_indices(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
@@ -61,24 +102,21 @@ def compute_indices(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.nda
     torque T_m and joint_vel dtheta per joint; hip_force f_i, hip_pos/hip_ref and
     foot_pos/foot_ref per Cartesian axis (x, y). Row 0 only supplies x_iH(t_a).
     """
-    if hip_pos.shape[0] < 2:
-        raise ValueError("an evaluation window needs at least two samples")
-    dist = float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0]))
-    tq, w, f = torque[1:], joint_vel[1:], hip_force[1:]
-    e_av = float(np.sum(np.abs(tq * w)) * dt) / dist
-    t_l = float(np.sqrt(np.sum(tq * tq) * dt)) / dist
-    f_l = float(np.sqrt(np.sum(f * f) * dt)) / dist
-    hp, hr, fp, fr = hip_pos[1:], hip_ref[1:], foot_pos[1:], foot_ref[1:]
-    return Indices(e_av, t_l, f_l, _rms_sum(hr[..., 0], hp[..., 0]),
-                   _rms_sum(hr[..., 1], hp[..., 1]), _rms_sum(fr[..., 0], fp[..., 0]),
-                   _rms_sum(fr[..., 1], fp[..., 1]), dist)
+    return window_sums(torque, joint_vel, hip_force, hip_pos, hip_ref, foot_pos, foot_ref,
+                       dt).indices()
+
+
+def sums_from_obs(obs: np.ndarray, hip_ref: np.ndarray, foot_ref: np.ndarray,
+                  dt: float) -> WindowSums:
+    """:class:`WindowSums` from observation samples (N+1, 9, 6, 2) and refs (N+1, 6, 2)."""
+    return window_sums(obs[:, O_TQ], obs[:, O_THV], obs[:, O_HF], obs[:, O_HP], hip_ref,
+                       obs[:, O_FP], foot_ref, dt)
 
 
 def indices_from_obs(obs: np.ndarray, hip_ref: np.ndarray, foot_ref: np.ndarray,
                      dt: float) -> Indices:
     """Indices from observation samples (N+1, 9, 6, 2) (hexapod_sim.core.layout) and refs."""
-    return compute_indices(obs[:, O_TQ], obs[:, O_THV], obs[:, O_HF], obs[:, O_HP], hip_ref,
-                           obs[:, O_FP], foot_ref, dt)
+    return sums_from_obs(obs, hip_ref, foot_ref, dt).indices()
 
 
 def evaluation_window(p: HexapodParams, duration: float) -> tuple[float, float]:
@@ -92,5 +130,5 @@ def evaluation_window(p: HexapodParams, duration: float) -> tuple[float, float]:
     return t_b - p.run.eval_cycles * period, t_b
 
 
-__all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "compute_indices", "evaluation_window",
-           "indices_from_obs"]
+__all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "WindowSums", "compute_indices",
+           "evaluation_window", "indices_from_obs", "sums_from_obs", "window_sums"]
