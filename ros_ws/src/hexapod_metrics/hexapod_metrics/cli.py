@@ -17,6 +17,8 @@ import numpy as np
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import HexapodParams, load_params
 
+from .core.errors import BagError
+
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.
 COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_analysis")
@@ -124,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     np.seterr(all="ignore")
     try:
         return func(args)
-    except (HexapodError, ValueError, OSError) as err:
+    except (HexapodError, BagError, ValueError, OSError, ArithmeticError) as err:
         print(f"hexapod {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,0 +1,279 @@
+"""Offline analysis of a bag: the seven indices per gait cycle and per controller segment.
+
+The bag is streamed chunk by chunk: samples are kept only until the gait cycle they belong to
+is complete, then reduced to additive :class:`~.indices.WindowSums`, so memory is bounded by
+one cycle (plus decimated plot series), not by the bag. The sample convention is the
+engine's (indices.py), so the analysis of a graph bag equals the engine's and the metrics
+node's numbers.
+
+Which controller was in charge at each tick comes from the ``header.frame_id`` of
+``/hexapod/joint_states`` (the sim writes the controller's name there); segments are split at
+its changes, i.e. at the recorded switches.
+"""
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.layout import O_HP, O_TQ
+from hexapod_sim.core.params import HexapodParams, load_params
+
+from .bag_reader import Bag, iter_joint_state_blocks, open_bag
+from .cdr import decode_diagnostic_array
+from .errors import BagReadError
+from .indices import Indices, WindowSums, sums_from_obs
+from .recording import params_from_custom_data, status_indices
+
+STREAMS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
+#: At most this many points per plot series (older points are thinned by 2 when exceeded).
+MAX_PLOT_POINTS = 20000
+MIXED = "mixed"
+
+
+@dataclass(frozen=True)
+class CycleResult:
+    """Gait cycle ``cycle`` (ticks cycle*M .. (cycle+1)*M): who ran it and its indices."""
+
+    cycle: int
+    t_a: float
+    t_b: float
+    controller: str            # MIXED if a switch happened inside the cycle
+    sums: WindowSums | None    # None if ticks are missing
+    missing: int = 0
+
+    @property
+    def indices(self) -> Indices | None:
+        """The cycle's indices, None if incomplete."""
+        return self.sums.indices() if self.sums else None
+
+
+@dataclass(frozen=True)
+class SegmentResult:
+    """A stretch of the run under one controller and the indices of its complete cycles."""
+
+    controller: str
+    t_start: float
+    t_end: float
+    cycles: int
+    indices: Indices | None
+
+
+@dataclass
+class PlotSeries:
+    """Decimated time series of leg 1 for the figures: t, |dxH|, |dyH|, T_m11, T_m12, label."""
+
+    stride: int = 1
+    t: list[np.ndarray] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)  # (n, 4)
+    labels: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, t: np.ndarray, values: np.ndarray, labels: np.ndarray) -> None:
+        """Append samples (already thinned by ``stride``)."""
+        self.t.append(t)
+        self.values.append(values)
+        self.labels.append(labels)
+        if sum(len(a) for a in self.t) > MAX_PLOT_POINTS:
+            self.t, self.values, self.labels = ([np.concatenate(x)[::2]] for x in (
+                self.t, self.values, self.labels))
+            self.stride *= 2
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, values (n, 4), labels)."""
+        if not self.t:
+            return np.zeros(0), np.zeros((0, 4)), np.zeros(0, dtype=object)
+        return (np.concatenate(self.t), np.concatenate(self.values),
+                np.concatenate(self.labels))
+
+
+@dataclass
+class BagAnalysis:
+    """Everything ``hexapod analyze`` reports about one bag."""
+
+    path: Path
+    params: HexapodParams
+    params_source: str
+    truncated: bool
+    truncation_reason: str
+    ticks: int
+    cycles: list[CycleResult]
+    segments: list[SegmentResult]
+    switches: list[tuple[float, str]]
+    online: list[tuple[int, str, Indices]]
+    series: PlotSeries
+
+
+def _header(raw: bytes) -> tuple[int, str]:
+    """(stamp ns, frame_id) of a CDR message that starts with a std_msgs/Header."""
+    sec, nsec, n = struct.unpack_from("<iII", raw, 4)
+    return sec * 1_000_000_000 + nsec, raw[16:16 + max(n - 1, 0)].decode("utf-8", "replace")
+
+
+def controller_changes(bag: Bag, dt_ns: int) -> list[tuple[int, str]]:
+    """(first tick, controller) at the start and at every change of joint_states' frame_id."""
+    changes: list[tuple[int, str]] = []
+    current = None
+    for _, _, raw in bag.messages([T.JOINT_STATES]):
+        stamp, frame = _header(raw)
+        if frame != current:
+            changes.append((int(round(stamp / dt_ns)), frame or "unknown"))
+            current = frame
+    return changes
+
+
+def _label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
+    starts = np.array([k for k, _ in changes], dtype=np.int64)
+    names = np.array([c for _, c in changes] or ["unknown"], dtype=object)
+    pos = np.searchsorted(starts, ticks, side="right") - 1
+    return names[np.clip(pos, 0, None)]
+
+
+class _Buffer:
+    """Rows of one topic not yet consumed, keyed by tick."""
+
+    def __init__(self) -> None:
+        self.k = np.zeros(0, np.int64)
+        self.data: np.ndarray | None = None  # (n, 3, width)
+
+    def push(self, k: np.ndarray, pos: np.ndarray, vel: np.ndarray, eff: np.ndarray) -> None:
+        rows = np.stack([pos, vel, eff], axis=1)
+        self.k = np.concatenate([self.k, k])
+        self.data = rows if self.data is None else np.concatenate([self.data, rows])
+        if np.any(np.diff(self.k) <= 0):  # out of order or duplicated: sort, keep the first
+            self.k, first = np.unique(self.k, return_index=True)
+            self.data = self.data[first]
+
+    def window(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Ticks present in [k0, k1] and their rows."""
+        a, b = np.searchsorted(self.k, [k0, k1 + 1])
+        assert self.data is not None
+        return self.k[a:b], self.data[a:b]
+
+    def drop_before(self, k: int) -> None:
+        a = int(np.searchsorted(self.k, k))
+        self.k = self.k[a:]
+        if self.data is not None:
+            self.data = self.data[a:]
+
+    @property
+    def last(self) -> int:
+        return int(self.k[-1]) if len(self.k) else -1
+
+
+def _online(bag: Bag) -> list[tuple[int, str, Indices]]:
+    out = []
+    if T.INDICES not in bag.topics:
+        return out
+    for _, _, raw in bag.messages([T.INDICES]):
+        for st in decode_diagnostic_array(raw)[1]:
+            try:
+                idx, kv = status_indices(st)
+            except (KeyError, ValueError):
+                continue
+            out.append((int(kv.get("cycle", -1)), kv.get("controller", "?"), idx))
+    return out
+
+
+def analyze_bag(path: str | Path) -> BagAnalysis:
+    """Stream a bag of this project and compute per-cycle and per-segment indices."""
+    with open_bag(path) as bag:
+        missing = [t for t in STREAMS if t not in bag.topics]
+        if missing:
+            raise BagReadError(f"{path}: not a hexapod bag (no {', '.join(missing)})")
+        custom = (bag.metadata or {}).get("custom_data") or {}
+        p = params_from_custom_data(custom)
+        source = "recorded in the bag"
+        if p is None:
+            p, source = load_params(), "the shipped defaults (the bag records none)"
+        dt = p.sim.control_period
+        dt_ns = int(round(dt * 1e9))
+        m = int(round(p.cycle_time / dt))
+        changes = controller_changes(bag, dt_ns)
+        buffers = {t: _Buffer() for t in STREAMS}
+        series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
+                                       // MAX_PLOT_POINTS))
+        cycles: list[CycleResult] = []
+        first_tick: int | None = None
+        next_cycle: int | None = None
+        ticks = 0
+        last_tick = 0
+
+        def consume(final: bool) -> None:
+            nonlocal next_cycle
+            while next_cycle is not None:
+                k0, k1 = next_cycle * m, (next_cycle + 1) * m
+                if not final and min(b.last for b in buffers.values()) < k1:
+                    return
+                if final and max(b.last for b in buffers.values()) < k1:
+                    return
+                cycles.append(_cycle(next_cycle, k0, k1))
+                for b in buffers.values():
+                    b.drop_before(k1)
+                next_cycle += 1
+
+        def _cycle(c: int, k0: int, k1: int) -> CycleResult:
+            parts = {t: buffers[t].window(k0, k1) for t in STREAMS}
+            want = k1 - k0 + 1
+            lost = max(want - len(ks) for ks, _ in parts.values())
+            labels = _label_ticks(changes, np.arange(k0, k1))  # who computed the torques
+            who = labels[0] if np.all(labels == labels[0]) else MIXED
+            if lost:
+                return CycleResult(c, k0 * dt, k1 * dt, who, None, lost)
+            cols = {t: (rows[:, 0], rows[:, 1], rows[:, 2]) for t, (_, rows) in parts.items()
+                    if t != T.REFERENCE}
+            obs = T.obs_from_columns(cols)
+            ref_rows = parts[T.REFERENCE][1]
+            ref = T.split_reference(ref_rows[:, 0], ref_rows[:, 1])
+            sel = slice(0, want - 1, series.stride)  # ticks k0 .. k1-1
+            sig = np.stack([np.abs(ref["hip"][sel, 0, 0] - obs[sel, O_HP, 0, 0]),
+                            np.abs(ref["hip"][sel, 0, 1] - obs[sel, O_HP, 0, 1]),
+                            obs[sel, O_TQ, 0, 0], obs[sel, O_TQ, 0, 1]], axis=1)
+            ks = np.arange(k0, k1)[sel]
+            series.add(ks * dt, sig, _label_ticks(changes, ks))
+            return CycleResult(c, k0 * dt, k1 * dt, who,
+                               sums_from_obs(obs, ref["hip"], ref["foot"], dt))
+
+        for topic, arrays in iter_joint_state_blocks(bag, STREAMS):
+            k = np.rint(arrays.stamps / dt_ns).astype(np.int64)
+            buffers[topic].push(k, arrays.position, arrays.velocity, arrays.effort)
+            if topic == T.JOINT_STATES:
+                ticks += len(k)
+                last_tick = max(last_tick, int(k.max(initial=-1)))
+            if first_tick is None and min(b.last for b in buffers.values()) >= 0:
+                first_tick = int(min(b.k[0] for b in buffers.values()))
+                next_cycle = -(-first_tick // m)  # first cycle boundary at or after it
+            consume(final=False)
+        consume(final=True)
+        online = _online(bag)
+        truncated, reason = bag.truncated, bag.truncation_reason
+    if ticks == 0:
+        why = f" (truncated: {reason})" if truncated else ""
+        raise BagReadError(f"{path}: no hexapod samples in the readable part of the bag{why}")
+    segments = _segments(cycles, changes, dt, last_tick * dt)
+    switches = [(k * dt, c) for k, c in changes]
+    return BagAnalysis(Path(path), p, source, truncated, reason, ticks, cycles, segments,
+                       switches, online, series)
+
+
+def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: float,
+              t_last: float) -> list[SegmentResult]:
+    """One segment per controller stretch; its indices cover its complete cycles."""
+    out = []
+    bounds = [k for k, _ in changes[1:]]
+    for j, (k, who) in enumerate(changes):
+        t0 = k * dt
+        t1 = bounds[j] * dt if j < len(bounds) else t_last
+        mine = [c for c in cycles if c.controller == who and c.sums is not None
+                and t0 <= c.t_a and c.t_b <= max(t1, t0) + 1e-9]
+        total = None
+        for c in mine:
+            total = c.sums if total is None else total + c.sums
+        out.append(SegmentResult(who, t0, t1, len(mine), total.indices() if total else None))
+    return out
+
+
+__all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag",
+           "controller_changes"]
