@@ -68,8 +68,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     controllers = [args.controller or p.run.controller] if args.controller != "both" else [
         "pd_p", "pd_pf"]
     results = {}
+    switches = []
+    for item in args.switch:
+        when, sep, who = item.partition(":")
+        if not sep:
+            raise HexapodError(f"--switch expects TIME:CONTROLLER, got {item!r}")
+        switches.append((float(when), who))
     for c in controllers:
-        sim = simulate(p, c, args.duration)
+        sim = simulate(p, c, args.duration, switches=switches)
         if args.bag:
             from .core.recording import write_run_bag
 
@@ -85,6 +91,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     print(f"T_max = {p.actuator.t_max:g} N m, ground = {100 * p.ground.scale:g} %, "
           f"window = [{results[controllers[0]].outcome.window[0]:g}, "
           f"{results[controllers[0]].outcome.window[1]:g}] s")
+    if switches:
+        print("switches: " + ", ".join(f"{c} at {t:g} s" for t, c in switches) +
+              " (columns name the starting controller)")
     header = f"{'index':<8} {'unit':<12}" + "".join(f"{c:>14}" for c in controllers)
     print(header)
     for name in INDEX_NAMES + ("L",):
@@ -107,6 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--duration", type=float, help="simulated seconds (default run.duration)")
     sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
     sp.add_argument("--bag", help="also write the run as a rosbag2/MCAP bag to this directory")
+    sp.add_argument("--switch", action="append", default=[], metavar="TIME:CONTROLLER",
+                    help="hand over to CONTROLLER at TIME s (repeatable), as the graph does")
     sp.set_defaults(func=_cmd_simulate)
     for name in COMMAND_MODULES:
         try:

@@ -81,7 +81,8 @@ class RunResult:
 
     ``obs`` (N+1, 9, 6, 2) follows layout.OBS_FIELDS; ``command`` (N, 6, 2) is T_C (N m);
     ``reference`` holds the desired trajectories at the same N+1 instants. ``diverged_at``
-    is the time (s) of the last good tick if the run blew up, else None.
+    is the time (s) of the last good tick if the run blew up, else None. ``switches`` lists
+    (first tick, controller) of every controller in charge, starting with tick 0.
     """
 
     params: HexapodParams
@@ -91,6 +92,12 @@ class RunResult:
     command: np.ndarray
     reference: Reference
     diverged_at: float | None = None
+    switches: tuple[tuple[int, str], ...] = ()
+
+    def controller_at(self, k: int) -> str:
+        """Controller that computed the command of tick k."""
+        return [c for start, c in self.switches if start <= k][-1] if self.switches \
+            else self.controller
 
 
 def tick_count(p: HexapodParams, duration: float) -> int:
@@ -104,28 +111,35 @@ def tick_count(p: HexapodParams, duration: float) -> int:
 
 
 def run(p: HexapodParams, controller: str | None = None, duration: float | None = None,
-        progress: Callable[[int, int], None] | None = None) -> RunResult:
+        progress: Callable[[int, int], None] | None = None,
+        switches: Sequence[tuple[float, str]] = ()) -> RunResult:
     """One closed-loop run from the initial state; records every tick.
 
     controller: 'pd_p' | 'pd_pf' (default p.run.controller); duration in s (default
-    p.run.duration). ``progress(done, total)`` is called after every block of ticks.
+    p.run.duration). ``switches``: (time s, controller) hand-overs; the new controller
+    computes the command of the first tick at or after that time, as in the graph.
+    ``progress(done, total)`` is called after every block of ticks.
     """
     controller = controller or p.run.controller
-    code = controller_code(controller)
     n = tick_count(p, p.run.duration if duration is None else duration)
+    schedule = [(0, controller)] + sorted(
+        (int(math.ceil(ts / p.sim.control_period - 1e-9)), c) for ts, c in switches)
+    for _, c in schedule:
+        controller_code(c)
     t = np.arange(n + 1) * p.sim.control_period
     ref = reference(p, t)
     P = model_vector(p)
-    gains = gain_vector(p.gains(controller))
     s = initial_state(p)
     torque = np.zeros((N_LEGS, 2))
     obs = np.full((n + 1,) + OBS_SHAPE, np.nan)
     cmd = np.full((n, N_LEGS, 2), np.nan)
     diverged_at = None
-    for k0 in range(0, n, BLOCK_TICKS):
-        k1 = min(n, k0 + BLOCK_TICKS)
-        done = run_ticks(s, P, code, gains, ref.theta[k0:k1], ref.theta_vel[k0:k1], torque,
-                         p.substeps, k0, obs[k0:k1], cmd[k0:k1], k0)
+    cuts = sorted({k for k, _ in schedule if 0 < k < n} | set(range(0, n, BLOCK_TICKS)) | {n})
+    for k0, k1 in zip(cuts[:-1], cuts[1:]):
+        who = [c for k, c in schedule if k <= k0][-1]
+        done = run_ticks(s, P, controller_code(who), gain_vector(p.gains(who)),
+                         ref.theta[k0:k1], ref.theta_vel[k0:k1], torque, p.substeps, k0,
+                         obs[k0:k1], cmd[k0:k1], k0)
         if progress is not None:
             progress(k0 + done, n)
         if done < k1 - k0:
@@ -133,7 +147,8 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
             break
     else:
         observe(s, torque, P, obs[n])
-    return RunResult(p, controller, t, obs, cmd, ref, diverged_at)
+    applied = tuple((k, c) for k, c in schedule if k < n)
+    return RunResult(p, controller, t, obs, cmd, ref, diverged_at, applied)
 
 
 @dataclass(frozen=True)

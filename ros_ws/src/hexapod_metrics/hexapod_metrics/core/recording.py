@@ -79,29 +79,35 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
         for name, (msgtype, qos) in TOPICS.items():
             if name != T.STATUS:
                 bag.add_topic(name, msgtype, qos)
-        bag.write_string(T.ACTIVE_CONTROLLER, 0, run.controller)
+        switch_ticks = dict(run.switches)
         last = n_ticks if run.diverged_at is None else int(round(
             run.diverged_at / p.sim.control_period))
         for k in range(last + 1):
             stamp = T.stamp_ns(run.t[k])
             obs = run.obs[k]
+            who = run.controller_at(k)
+            if k in switch_ticks:
+                bag.write_string(T.ACTIVE_CONTROLLER, stamp, who)
             bag.write_clock(T.CLOCK, stamp)
             for topic in T.STATE_TOPICS:
                 c = T.state_columns(obs, topic)
                 bag.write_joint_state(topic, stamp, c.names, c.position, c.velocity, c.effort,
-                                      frame_id=run.controller if topic == T.JOINT_STATES else "")
+                                      frame_id=who if topic == T.JOINT_STATES else "")
             c = T.reference_columns(ref.theta[k], ref.theta_vel[k], ref.hip[k], ref.hip_vel[k],
                                     ref.foot[k], ref.foot_vel[k])
             bag.write_joint_state(T.REFERENCE, stamp, c.names, c.position, c.velocity, c.effort)
             if k < last:
                 c = T.command_columns(run.command[k])
                 bag.write_joint_state(T.JOINT_COMMANDS, stamp, c.names, c.position, c.velocity,
-                                      c.effort, frame_id=run.controller)
+                                      c.effort, frame_id=who)
             if k > 0 and k % ticks_per_cycle == 0 and np.isfinite(run.obs[k, O_HP]).all():
                 sl = slice(k - ticks_per_cycle, k + 1)
                 idx = indices_from_obs(run.obs[sl], ref.hip[sl], ref.foot[sl],
                                        p.sim.control_period)
-                st = indices_status(idx, run.controller, k // ticks_per_cycle - 1,
+                who = run.controller_at(k - 1)
+                if run.controller_at(k - ticks_per_cycle) != who:
+                    who = "mixed"
+                st = indices_status(idx, who, k // ticks_per_cycle - 1,
                                     float(run.t[sl.start]), float(run.t[k]))
                 bag.write_diagnostic_array(T.INDICES, stamp, [st])
     return path

@@ -55,12 +55,15 @@ def window_ticks(p: HexapodParams, duration: float) -> tuple[int, int]:
 
 
 def simulate(p: HexapodParams, controller: str | None = None, duration: float | None = None,
-             progress: Callable[[int, int], None] | None = None) -> Simulation:
-    """Run one case in process and compute the indices of its evaluation window."""
+             progress: Callable[[int, int], None] | None = None,
+             switches: Sequence[tuple[float, str]] = ()) -> Simulation:
+    """Run one case in process and compute the indices of its evaluation window.
+
+    ``switches``: (time s, controller) hand-overs during the run (see closed_loop.run)."""
     controller = controller or p.run.controller
     duration = p.run.duration if duration is None else duration
     k_a, k_b = window_ticks(p, duration)
-    r = run(p, controller, duration, progress)
+    r = run(p, controller, duration, progress, switches)
     window = (float(r.t[k_a]), float(r.t[k_b]))
     case = Case(p, controller)
     if r.diverged_at is not None:
