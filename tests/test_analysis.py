@@ -144,3 +144,19 @@ def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path):
     assert (tmp_path / "a.csv").read_text().count("segment") == 4
     assert sorted(x.name for x in (tmp_path / "plots").iterdir()) == [
         "Tm11.png", "Tm12.png", "dxH.png", "dyH.png"]
+
+
+def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path):
+    from PIL import Image
+
+    from hexapod_metrics.animation import load_frames
+
+    bag, r = switched_bag
+    segments, l1, truncated = load_frames(bag, fps=5.0)
+    assert [s.controller for s in segments] == ["pd_pf", "pd_p"] and not truncated
+    np.testing.assert_array_equal(segments[1].obs[0], r.obs[2000])
+    out = tmp_path / "walk.gif"
+    subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "animate", str(bag), "--out",
+                    str(out), "--fps", "5"], check=True, capture_output=True, timeout=300)
+    with Image.open(out) as im:
+        assert im.n_frames == 11 and im.size[0] > 2 * im.size[1]

@@ -1,4 +1,4 @@
-"""Subcommands `sweep`, `tune` and `reproduce` (and `analyze`, `animate` from their modules)."""
+"""Subcommands `sweep`, `tune` and `reproduce`; registers `analyze` and `animate` too."""
 from __future__ import annotations
 
 import argparse
@@ -152,7 +152,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Register sweep, tune, reproduce (and analyze/animate when present)."""
+    """Register sweep, tune, reproduce, analyze and animate."""
     sp = sub.add_parser("sweep", help="ground or T_max sweep for both controllers (E2-E4)")
     params_arguments(sp)
     sp.add_argument("kind", choices=["ground", "tmax"], help="what to sweep")
@@ -184,14 +184,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     _backend_args(rp)
     rp.set_defaults(func=_cmd_reproduce)
 
-    for name in ("analyze", "animate"):
-        try:
-            mod = __import__(f"hexapod_metrics.cmd_{name}", fromlist=["add_parser"])
-        except ModuleNotFoundError as err:
-            if err.name != f"hexapod_metrics.cmd_{name}":
-                raise
-            continue
-        mod.add_parser(sub)
+    from . import animation, cmd_analyze
+
+    cmd_analyze.add_parser(sub)
+    animation.add_parser(sub)
 
 
 __all__ = ["add_parser", "progress_factory"]

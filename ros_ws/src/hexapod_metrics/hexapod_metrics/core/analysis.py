@@ -124,7 +124,7 @@ def controller_changes(bag: Bag, dt_ns: int) -> list[tuple[int, str]]:
     return changes
 
 
-def _label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
+def label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
     starts = np.array([k for k, _ in changes], dtype=np.int64)
     names = np.array([c for _, c in changes] or ["unknown"], dtype=object)
     pos = np.searchsorted(starts, ticks, side="right") - 1
@@ -218,7 +218,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             parts = {t: buffers[t].window(k0, k1) for t in STREAMS}
             want = k1 - k0 + 1
             lost = max(want - len(ks) for ks, _ in parts.values())
-            labels = _label_ticks(changes, np.arange(k0, k1))  # who computed the torques
+            labels = label_ticks(changes, np.arange(k0, k1))  # who computed the torques
             who = labels[0] if np.all(labels == labels[0]) else MIXED
             if lost:
                 return CycleResult(c, k0 * dt, k1 * dt, who, None, lost)
@@ -232,7 +232,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
                             np.abs(ref["hip"][sel, 0, 1] - obs[sel, O_HP, 0, 1]),
                             obs[sel, O_TQ, 0, 0], obs[sel, O_TQ, 0, 1]], axis=1)
             ks = np.arange(k0, k1)[sel]
-            series.add(ks * dt, sig, _label_ticks(changes, ks))
+            series.add(ks * dt, sig, label_ticks(changes, ks))
             return CycleResult(c, k0 * dt, k1 * dt, who,
                                sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
@@ -275,5 +275,5 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
     return out
 
 
-__all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag",
+__all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag", "label_ticks",
            "controller_changes"]
