@@ -24,6 +24,21 @@ from .core.simulate import Simulation, simulate
 
 ProgressFactory = Callable[[str, int], Callable[[int], None]]
 
+#: What a failing claim means in this model (shown only when the claim fails).
+WHY_FAILS = {
+    "C1": "At the base ground PD-P tracks at least one coordinate as well as PD-P&F, or "
+          "needs less torque; compare Figs. 4-7.",
+    "C2": "The failing points are listed in the table. On ground harder than the base, "
+          "PD-P&F's horizontal hip and foot errors overtake PD-P's (Figs. 10-11): its force "
+          "feedback turns the stiffer foot impacts into torque impulses (E4 table, largest "
+          "torque step), the feet bounce, and every bounce stores a new touchdown point, so "
+          "the landing positions drift. The vertical errors stay below PD-P's everywhere.",
+    "C3": "At least one controller keeps its tracking errors within the stated factor of its "
+          "T_max 400 values when saturated; see the E3 table and figure.",
+    "C4": "PD-P&F neither diverges nor shows the stated growth of errors or torque steps on "
+          "harder ground with ideal actuators; see the E4 table and Figs. 16-17.",
+}
+
 
 @dataclass(frozen=True)
 class Plan:
@@ -218,7 +233,9 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     md[4:4] = ["## The paper's claims in our model", "",
                "| claim | statement | verdict | rule | numbers |", "|---|---|---|---|---|"] + [
         f"| {v.claim} | {v.statement} | **{'holds' if v.holds else 'fails'}** | {v.rule} | "
-        f"{v.evidence} |" for v in verdicts] + [""]
+        f"{v.evidence} |" for v in verdicts] + [""] + [
+        f"**Why {v.claim} fails here.** {WHY_FAILS.get(v.claim, 'See the numbers above.')}"
+        for v in verdicts if not v.holds] + [""]
     (out / "README.md").write_text("\n".join(md) + "\n")
     doc = {"claims": [v.__dict__ for v in verdicts],
            "base": {c: i.as_dict() for c, i in base400.items()},
