@@ -112,11 +112,22 @@ def _header(raw: bytes) -> tuple[int, str]:
     return sec * 1_000_000_000 + nsec, raw[16:16 + max(n - 1, 0)].decode("utf-8", "replace")
 
 
-def controller_changes(bag: Bag, dt_ns: int) -> list[tuple[int, str]]:
-    """(first tick, controller) at the start and at every change of joint_states' frame_id."""
+def controller_changes(bag: Bag, dt_ns: int,
+                       online: list[tuple[int, str, Indices]] | None = None
+                       ) -> list[tuple[int, str]]:
+    """(first tick, controller) at the start and at every change of joint_states' frame_id.
+
+    If ``online`` is given, the /hexapod/indices records met in the same pass are appended
+    to it as (cycle, controller, indices).
+    """
     changes: list[tuple[int, str]] = []
     current = None
-    for _, _, raw in bag.messages([T.JOINT_STATES]):
+    wanted = [T.JOINT_STATES] + ([T.INDICES] if online is not None else [])
+    for topic, _, raw in bag.messages(wanted):
+        if topic == T.INDICES:
+            assert online is not None
+            online.extend(_online_records(raw))
+            continue
         stamp, frame = _header(raw)
         if frame != current:
             changes.append((int(round(stamp / dt_ns)), frame or "unknown"))
@@ -163,17 +174,15 @@ class _Buffer:
         return int(self.k[-1]) if len(self.k) else -1
 
 
-def _online(bag: Bag) -> list[tuple[int, str, Indices]]:
+def _online_records(raw: bytes) -> list[tuple[int, str, Indices]]:
+    """The per-cycle indices of one /hexapod/indices message."""
     out = []
-    if T.INDICES not in bag.topics:
-        return out
-    for _, _, raw in bag.messages([T.INDICES]):
-        for st in decode_diagnostic_array(raw)[1]:
-            try:
-                idx, kv = status_indices(st)
-            except (KeyError, ValueError):
-                continue
-            out.append((int(kv.get("cycle", -1)), kv.get("controller", "?"), idx))
+    for st in decode_diagnostic_array(raw)[1]:
+        try:
+            idx, kv = status_indices(st)
+        except (KeyError, ValueError):
+            continue
+        out.append((int(kv.get("cycle", -1)), kv.get("controller", "?"), idx))
     return out
 
 
@@ -191,7 +200,8 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
-        changes = controller_changes(bag, dt_ns)
+        online: list[tuple[int, str, Indices]] = []
+        changes = controller_changes(bag, dt_ns, online)
         buffers = {t: _Buffer() for t in STREAMS}
         series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
                                        // MAX_PLOT_POINTS))
@@ -247,7 +257,6 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
                 next_cycle = -(-first_tick // m)  # first cycle boundary at or after it
             consume(final=False)
         consume(final=True)
-        online = _online(bag)
         truncated, reason = bag.truncated, bag.truncation_reason
     if ticks == 0:
         why = f" (truncated: {reason})" if truncated else ""
