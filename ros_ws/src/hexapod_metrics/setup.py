@@ -21,6 +21,7 @@ setup(
         'console_scripts': [
             'metrics = hexapod_metrics.metrics_node:main',
             'hexapod = hexapod_metrics.cli:main',
+            'markers = hexapod_metrics.marker_node:main',
         ],
     },
 )
