@@ -1,0 +1,244 @@
+"""Lifecycle nodes ``pd_p_controller`` and ``pd_pf_controller``: one class, two architectures.
+
+Lifecycle: *configure* reads the gains (``pd_p.*`` or ``pd_pf.*``; they may also change
+while running), creates the command publisher and subscribes to the reference and the foot
+forces; *activate* enables the publisher and subscribes to the joint states (the last
+endpoint to appear, which tells the sim this controller is ready); *deactivate* stops
+answering; *cleanup* removes everything. With ``autostart`` (default true) the node
+configures and activates itself at start, so no lifecycle manager is needed; the
+lifecycle services keep working (``hexapod switch`` uses them).
+
+Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
+is answered once the reference and the foot forces with the same stamp are there (both
+architectures wait for the same set, so their timing is the same): the demanded torque
+T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
+:func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
+``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the
+architecture's name. References and foot forces are buffered by stamp (those older than
+the newest state are dropped), so a controller that is not in charge is ready to take over
+at any tick boundary.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleState, Node as LifecycleNode, TransitionCallbackReturn
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+
+from hexapod_sim import conversions as C
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.params import N_LEGS, HexapodParams
+from hexapod_sim.hot_loop import HotLoop, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_params
+
+from .core.controllers import control_law, controller_code, gain_vector
+
+MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
+
+
+class ControllerNode(LifecycleNode):
+    """A joint controller of one architecture ('pd_p' or 'pd_pf')."""
+
+    def __init__(self, architecture: str) -> None:
+        self.arch = architecture
+        self.code = controller_code(architecture)
+        super().__init__(f"{architecture}_controller")
+        self.binding = ParamBinding(self, declare_params(self), self._on_params)
+        self.autostart = bool(self.declare_parameter("autostart", True).value)
+        self.loop = HotLoop(self)
+        self.js_codec = C.CODECS[T.JOINT_STATES]
+        self.ff_codec = C.CODECS[T.FOOT_FORCES]
+        self.ref_codec = C.CODECS[T.REFERENCE]
+        self.cmd_codec = C.CODECS[T.JOINT_COMMANDS]
+        self.pub: Any = None
+        self.subs: dict[str, Any] = {}
+        self.active = False
+        self.refs: dict[int, C.JointStateView] = {}
+        self.forces: dict[int, C.JointStateView] = {}
+        self.pending: int | None = None  # stamp of a state of ours waiting for its inputs
+        self.obs = np.zeros((9, N_LEGS, 2))
+        self.theta_d = np.zeros((N_LEGS, 2))
+        self.theta_vel_d = np.zeros((N_LEGS, 2))
+        self.demand = np.zeros((N_LEGS, 2))
+        self.answered = 0
+        self._load_gains(self.binding.params)
+        self._law()  # warm up the compiled law before the first tick
+
+    # ------------------------------------------------------------------ parameters
+    def _load_gains(self, p: HexapodParams) -> None:
+        self.gains = gain_vector(p.gains(self.arch))
+        self.l1, self.l2 = p.robot.leg_length_1, p.robot.leg_length_2
+
+    def _on_params(self, p: HexapodParams, names: set[str]) -> None:
+        if any(n.startswith(self.arch + ".") for n in names):
+            self._load_gains(p)
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Read the gains, create the command publisher, subscribe to reference and forces."""
+        self._load_gains(self.binding.params)
+        self.pub = self.create_lifecycle_publisher(
+            JointState, T.JOINT_COMMANDS, C.TOPIC_QOS[T.JOINT_COMMANDS].publisher())
+        self.subs[T.REFERENCE] = self.loop.subscribe(
+            JointState, T.REFERENCE, self._on_reference,
+            C.TOPIC_QOS[T.REFERENCE].subscriber(C.CONTROL_DEPTH), wake=False)
+        self.subs[T.FOOT_FORCES] = self.loop.subscribe(
+            JointState, T.FOOT_FORCES, self._on_forces,
+            C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
+        self.get_logger().info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
+                               f"{tuple(float(g) for g in self.gains)}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Enable the publisher and listen to the joint states."""
+        ret = super().on_activate(state)
+        if T.JOINT_STATES not in self.subs:
+            self.subs[T.JOINT_STATES] = self.loop.subscribe(
+                JointState, T.JOINT_STATES, self._on_state,
+                C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
+        self.active = True
+        self.get_logger().info("active: answering the states that name "
+                               f"'{self.arch}' as the controller in charge")
+        return ret
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop answering (the subscriptions stay, buffers keep filling)."""
+        self.active = False
+        self.pending = None
+        self.get_logger().info("inactive")
+        return super().on_deactivate(state)
+
+    def _teardown(self) -> None:
+        self.active = False
+        self.pending = None
+        for sub in self.subs.values():
+            self.loop.unsubscribe(sub)
+        self.subs.clear()
+        if self.pub is not None:
+            self.destroy_lifecycle_publisher(self.pub)
+            self.pub = None
+        self.refs.clear()
+        self.forces.clear()
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Remove publisher and subscriptions."""
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Remove publisher and subscriptions."""
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    # ------------------------------------------------------------------ per tick
+    def _on_reference(self, data: bytes) -> None:
+        ref = self.ref_codec.decode(data)
+        self.refs[ref.stamp_ns] = ref
+        if len(self.refs) > MAX_BUFFERED:
+            del self.refs[min(self.refs)]
+        if self.pending == ref.stamp_ns:
+            self._answer()
+
+    def _on_forces(self, data: bytes) -> None:
+        ff = self.ff_codec.decode(data)
+        self.forces[ff.stamp_ns] = ff
+        if len(self.forces) > MAX_BUFFERED:
+            del self.forces[min(self.forces)]
+        if self.pending == ff.stamp_ns:
+            self._answer()
+
+    def _on_state(self, data: bytes) -> None:
+        """A state: ours to answer if it names this controller (and we are active).
+
+        Reference and foot forces do not wake the loop (hot_loop.py): they queue in their
+        subscriptions (100 deep) and are taken here, when a state needs them; only if one
+        is still missing do they wake the loop until the answer is out.
+        """
+        js = self.js_codec.decode(data)
+        if js.frame_id != self.arch or not self.active:
+            return
+        stamp = js.stamp_ns
+        C.fill_obs(self.obs, T.JOINT_STATES, js.position, js.velocity, js.effort)
+        self.pending = None
+        self.loop.take(self.subs[T.REFERENCE])
+        self.loop.take(self.subs[T.FOOT_FORCES])
+        for buf in (self.refs, self.forces):
+            for s in [s for s in buf if s < stamp]:
+                del buf[s]
+        self.pending = stamp
+        self._answer()
+        if self.pending is not None:  # an input is late: let it wake us
+            self.loop.set_wake(self.subs[T.REFERENCE], True)
+            self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
+
+    def _answer(self) -> None:
+        stamp = self.pending
+        ref = self.refs.get(stamp)  # type: ignore[arg-type]
+        ff = self.forces.get(stamp)  # type: ignore[arg-type]
+        if ref is None or ff is None:
+            return
+        self.pending = None
+        self.loop.set_wake(self.subs[T.REFERENCE], False)
+        self.loop.set_wake(self.subs[T.FOOT_FORCES], False)
+        C.fill_obs(self.obs, T.FOOT_FORCES, ff.position, ff.velocity, ff.effort)
+        r = T.split_reference(ref.position, ref.velocity)
+        self.theta_d[:] = r["theta"]
+        self.theta_vel_d[:] = r["theta_vel"]
+        self._law()
+        c = T.command_columns(self.demand)
+        self.pub.publish(self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity,  # type: ignore[arg-type]
+                                               c.effort))
+        self.answered += 1
+
+    def _law(self) -> None:
+        control_law(self.code, self.gains, self.obs, self.theta_d, self.theta_vel_d, self.l1,
+                    self.l2, self.demand)
+
+
+def _main(architecture: str, args: list[str] | None) -> int:
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    code = 0
+    try:
+        node = ControllerNode(architecture)
+        install_stop_signals(node.loop)
+        if node.autostart:
+            node.trigger_configure()
+            node.trigger_activate()
+        node.loop.spin()
+    except HexapodError as err:
+        rclpy.logging.get_logger(f"{architecture}_controller").error(str(err))
+        code = 2 if isinstance(err, ParameterError) else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.get_logger().info(f"stopping after {node.answered} commands")
+            if node.pub is not None:
+                node.pub.wait_for_all_acked(Duration(seconds=1))
+            node.loop.destroy()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+def main_pd_p(args: list[str] | None = None) -> int:
+    """Entry point of ``pd_p_controller``."""
+    return _main("pd_p", args)
+
+
+def main_pd_pf(args: list[str] | None = None) -> int:
+    """Entry point of ``pd_pf_controller``."""
+    return _main("pd_pf", args)
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1] if len(sys.argv) > 1 and sys.argv[1] in ("pd_p", "pd_pf")
+                   else "pd_pf", None))

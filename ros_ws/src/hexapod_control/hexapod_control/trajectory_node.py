@@ -1,0 +1,104 @@
+"""Node ``trajectory_generator``: publishes the reference trajectories on ``/hexapod/reference``.
+
+On ``/clock`` at t_k it publishes the reference for t_k (unless already published) and for
+t_{k+1} .. t_{k+lookahead} (parameter ``lookahead``, default 1), so that the controller
+normally has the reference of a tick before that tick's state arrives. Each message is
+stamped with the time it is for; its columns are
+:func:`hexapod_sim.core.topics.reference_columns` of :func:`hexapod_sim.core.gait.reference`
+(paper eqs. 1-4). References are computed a block of ticks at a time, at the same instants
+``k * control period`` as the in-process loop, so the numbers are identical to it.
+
+The publisher is transient-local (see hexapod_sim.conversions.TOPIC_QOS): a controller or
+recorder that matches late still receives the recent references.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from hexapod_sim import conversions as C
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.gait import Reference, reference
+from hexapod_sim.hot_loop import HotLoop, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_params
+
+BLOCK_TICKS = 1000  # references computed per block
+
+
+class TrajectoryNode(Node):
+    """Reference generator driven by the simulated clock."""
+
+    def __init__(self) -> None:
+        super().__init__("trajectory_generator")
+        self.binding = ParamBinding(self, declare_params(self))
+        self.lookahead = int(self.declare_parameter("lookahead", 1).value)
+        if self.lookahead < 0:
+            raise ParameterError("lookahead", self.lookahead, "an int >= 0")
+        p = self.binding.params
+        self.period = p.sim.control_period
+        self.period_ns = int(round(self.period * 1e9))
+        self.codec = C.CODECS[T.REFERENCE]
+        self.block: tuple[int, Reference] | None = None
+        self.next_tick = 0  # first tick not yet published
+        self.loop = HotLoop(self)
+        self.pub = self.create_publisher(JointState, T.REFERENCE,
+                                         C.TOPIC_QOS[T.REFERENCE].publisher())
+        self._reference_of(0)  # warm up (and validate) before the first clock arrives
+        self.loop.subscribe(Clock, T.CLOCK, self._on_clock,
+                            C.TOPIC_QOS[T.CLOCK].subscriber(C.CONTROL_DEPTH))
+
+    def _reference_of(self, k: int) -> T.Columns:
+        if self.block is None or not 0 <= k - self.block[0] < BLOCK_TICKS:
+            t = np.arange(k, k + BLOCK_TICKS) * self.period
+            self.block = (k, reference(self.binding.params, t))
+        k0, ref = self.block
+        i = k - k0
+        return T.reference_columns(ref.theta[i], ref.theta_vel[i], ref.hip[i], ref.hip_vel[i],
+                                   ref.foot[i], ref.foot_vel[i])
+
+    def _on_clock(self, data: bytes) -> None:
+        k = C.tick_of(C.decode_stamp(data), self.period_ns)
+        if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
+            self.get_logger().info(f"clock went back to tick {k}: restarting the references")
+            self.next_tick = k
+        for j in range(max(k, self.next_tick), k + self.lookahead + 1):
+            c = self._reference_of(j)
+            self.pub.publish(self.codec.encode(T.stamp_ns(j * self.period), "", c.position,
+                                               c.velocity, c.effort))
+        self.next_tick = max(self.next_tick, k + self.lookahead + 1)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``trajectory_generator``."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    code = 0
+    try:
+        node = TrajectoryNode()
+        install_stop_signals(node.loop)
+        node.loop.spin()
+    except HexapodError as err:
+        rclpy.logging.get_logger("trajectory_generator").error(str(err))
+        code = 2 if isinstance(err, ParameterError) else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.pub.wait_for_all_acked(Duration(seconds=1))
+            node.loop.destroy()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,308 @@
+"""`hexapod switch` and `hexapod status`, and a small launcher for the node graph.
+
+* ``hexapod switch pd_p|pd_pf``: makes sure the target controller node is lifecycle-active
+  (configures and activates it through its ``change_state`` service if needed), then sets
+  ``run.controller`` on ``/hexapod_sim`` through the standard ``set_parameters`` service;
+  the sim hands over at the next tick boundary. One line on success; a one-line error and
+  exit code 2 if the sim or the controller does not answer within ``--timeout``.
+* ``hexapod status``: waits for one ``/hexapod/status`` message and prints the nodes seen
+  in the graph, the mode, simulated time, controller in charge, missed and late ticks.
+
+:class:`GraphProcesses` starts node processes (``python -c 'from <module> import main'``
+with ``--ros-args``), keeps their logs, and stops them (SIGINT, then SIGTERM, then
+SIGKILL); the benchmark and soak scripts and the graph tests use it.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import IO, Any, Callable, Sequence
+
+from hexapod_sim.core.errors import HexapodError
+from hexapod_sim.core.params import CONTROLLERS
+
+#: node name -> (module, entry point)
+NODES: dict[str, tuple[str, str]] = {
+    "hexapod_sim": ("hexapod_sim.sim_node", "main"),
+    "trajectory_generator": ("hexapod_control.trajectory_node", "main"),
+    "pd_p_controller": ("hexapod_control.controller_node", "main_pd_p"),
+    "pd_pf_controller": ("hexapod_control.controller_node", "main_pd_pf"),
+    "metrics": ("hexapod_metrics.metrics_node", "main"),
+}
+#: Nodes that run on simulated time (``-p use_sim_time:=true``).
+SIM_TIME_NODES = tuple(os.environ.get("HX_SIM_TIME_NODES", "trajectory_generator,pd_p_controller,pd_pf_controller,metrics").split(","))
+
+
+class GraphError(HexapodError):
+    """The graph (or one of its nodes) is not there or does not answer."""
+
+
+# --------------------------------------------------------------------------- launcher
+
+
+class GraphProcesses:
+    """Start, watch and stop node processes of one graph (one ROS_DOMAIN_ID).
+
+    ``env`` adds to the current environment (set ``ROS_DOMAIN_ID`` there); every node gets
+    ``--params-file params`` if given and its log in ``log_dir/<name>.log``.
+    """
+
+    def __init__(self, log_dir: str | os.PathLike[str], params: str | None = None,
+                 env: dict[str, str] | None = None) -> None:
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.params = params
+        self.env = {**os.environ, **(env or {})}
+        self.env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        self.env["PYTHONUNBUFFERED"] = "1"
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._logs: dict[str, IO[bytes]] = {}
+
+    def start(self, name: str, *overrides: str, node: str | None = None) -> subprocess.Popen[bytes]:
+        """Start node ``node`` (default ``name``) as process ``name`` with ``-p`` overrides
+        (``"stop_at_end:=true"``)."""
+        node = node or name
+        module, func = NODES[node]
+        args = [sys.executable, "-c",
+                f"import sys; from {module} import {func}; sys.exit({func}())", "--ros-args"]
+        if self.params:
+            args += ["--params-file", str(self.params)]
+        if node in SIM_TIME_NODES:
+            args += ["-p", "use_sim_time:=true"]
+        for o in overrides:
+            args += ["-p", o]
+        log = open(self.log_dir / f"{name}.log", "ab")
+        self._logs[name] = log
+        self.procs[name] = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT,
+                                            env=self.env, start_new_session=True)
+        return self.procs[name]
+
+    def log(self, name: str) -> str:
+        """The log of process ``name`` so far."""
+        return (self.log_dir / f"{name}.log").read_text(errors="replace")
+
+    def wait_for(self, cond: Callable[[], bool], timeout: float, what: str) -> None:
+        """Poll ``cond`` until true; raise GraphError naming ``what`` after ``timeout`` s."""
+        end = time.monotonic() + timeout
+        while not cond():
+            if time.monotonic() > end:
+                raise GraphError(f"timed out after {timeout:g} s waiting for {what}")
+            time.sleep(0.05)
+
+    def wait_log(self, name: str, text: str, timeout: float = 60.0) -> None:
+        """Wait until ``text`` appears in the log of ``name``."""
+        self.wait_for(lambda: text in self.log(name), timeout, f"'{text}' in {name}'s log")
+
+    def wait_exit(self, name: str, timeout: float) -> int:
+        """Wait for process ``name`` to end; its exit code."""
+        return self.procs[name].wait(timeout)
+
+    def cpu_seconds(self, name: str) -> float:
+        """User + system CPU time used so far by process ``name`` (Linux /proc)."""
+        fields = Path(f"/proc/{self.procs[name].pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def rss_mb(self, name: str) -> float:
+        """Resident memory of process ``name`` (MB)."""
+        for line in Path(f"/proc/{self.procs[name].pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def stop(self, name: str, timeout: float = 10.0) -> int | None:
+        """SIGINT, then SIGTERM, then SIGKILL (each after ``timeout`` s); the exit code."""
+        proc = self.procs.get(name)
+        if proc is None:
+            return None
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            if proc.poll() is not None:
+                break
+            try:
+                proc.send_signal(sig)
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                continue
+            except ProcessLookupError:
+                break
+        code = proc.wait()
+        self._logs.pop(name).close()
+        del self.procs[name]
+        return code
+
+    def kill(self, name: str, sig: int = signal.SIGKILL) -> int:
+        """Send ``sig`` and wait for the end; the exit code."""
+        proc = self.procs[name]
+        proc.send_signal(sig)
+        code = proc.wait(30)
+        self._logs.pop(name).close()
+        del self.procs[name]
+        return code
+
+    def stop_all(self, order: Sequence[str] = ()) -> dict[str, int | None]:
+        """Stop ``order`` first (in that order), then the rest."""
+        codes = {}
+        for name in list(order) + [n for n in self.procs if n not in order]:
+            if name in self.procs:
+                codes[name] = self.stop(name)
+        return codes
+
+
+# --------------------------------------------------------------------------- ROS helpers
+
+
+def _ros_node(name: str) -> Any:
+    import rclpy
+    from rclpy.node import Node
+
+    rclpy.init(args=[])
+    return Node(f"{name}_{os.getpid()}", start_parameter_services=False)
+
+
+def _call(node: Any, srv_type: Any, service: str, request: Any, timeout: float,
+          missing: str) -> Any:
+    import rclpy
+
+    client = node.create_client(srv_type, service)
+    if not client.wait_for_service(timeout_sec=timeout):
+        raise GraphError(missing)
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+    if not future.done() or future.result() is None:
+        raise GraphError(f"{service} did not answer within {timeout:g} s")
+    return future.result()
+
+
+def _domain() -> str:
+    return os.environ.get("ROS_DOMAIN_ID", "0")
+
+
+def ensure_active(node: Any, controller: str, timeout: float) -> str:
+    """Configure and activate ``<controller>_controller`` if needed; its state before."""
+    from lifecycle_msgs.msg import State, Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+
+    name = f"{controller}_controller"
+    missing = (f"controller node {name} is not running on ROS_DOMAIN_ID={_domain()} "
+               f"(no /{name}/get_state within {timeout:g} s): start it first")
+    state = _call(node, GetState, f"/{name}/get_state", GetState.Request(), timeout,
+                  missing).current_state
+    before = state.label
+    steps = {State.PRIMARY_STATE_UNCONFIGURED: [Transition.TRANSITION_CONFIGURE,
+                                                 Transition.TRANSITION_ACTIVATE],
+             State.PRIMARY_STATE_INACTIVE: [Transition.TRANSITION_ACTIVATE],
+             State.PRIMARY_STATE_ACTIVE: []}
+    if state.id not in steps:
+        raise GraphError(f"{name} is in lifecycle state '{state.label}': cannot activate it")
+    for transition in steps[state.id]:
+        req = ChangeState.Request()
+        req.transition.id = transition
+        ok = _call(node, ChangeState, f"/{name}/change_state", req, timeout, missing).success
+        if not ok:
+            raise GraphError(f"{name} refused lifecycle transition {transition}")
+    return before
+
+
+def switch(controller: str, timeout: float = 10.0) -> str:
+    """Hand control to ``controller`` (see module docstring); the line to print."""
+    import rclpy
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    node = _ros_node("hexapod_switch")
+    try:
+        missing = (f"no hexapod_sim running on ROS_DOMAIN_ID={_domain()} "
+                   f"(no /hexapod_sim/set_parameters within {timeout:g} s)")
+        current = _call(node, GetParameters, "/hexapod_sim/get_parameters",
+                        GetParameters.Request(names=["run.controller"]), timeout,
+                        missing).values[0].string_value
+        before = ensure_active(node, controller, timeout)
+        value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=controller)
+        req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
+        result = _call(node, SetParameters, "/hexapod_sim/set_parameters", req, timeout,
+                       missing).results[0]
+        if not result.successful:
+            raise GraphError(f"hexapod_sim refused run.controller = {controller}: "
+                             f"{result.reason}")
+        activated = "" if before == "active" else f"; {controller}_controller was {before}, now active"
+        if current == controller:
+            return f"{controller} already in charge{activated}"
+        return f"switching {current} -> {controller} at the next tick{activated}"
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
+    """Nodes seen in the graph and the values of one /hexapod/status (None if none came)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from hexapod_sim.conversions import statuses
+    from hexapod_sim.core.topics import STATUS
+
+    node = _ros_node("hexapod_status")
+    got: list[DiagnosticArray] = []
+    try:
+        node.create_subscription(DiagnosticArray, STATUS, got.append, 10)
+        end = time.monotonic() + timeout
+        while not got and time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        nodes = sorted(n for n in node.get_node_names() if not n.startswith("hexapod_status_"))
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if not got:
+        return nodes, None
+    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"]
+    return nodes, (dict(sim[0].values) | {"level": sim[0].level, "message": sim[0].message}
+                   if sim else None)
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def _cmd_switch(args: argparse.Namespace) -> int:
+    print(switch(args.controller, args.timeout))
+    return 0
+
+
+def _cmd_status(args: argparse.Namespace) -> int:
+    nodes, st = status(args.timeout)
+    if st is None:
+        seen = ", ".join(nodes) if nodes else "no nodes"
+        print(f"hexapod status: nothing runs on ROS_DOMAIN_ID={_domain()}: no /hexapod/status "
+              f"within {args.timeout:g} s ({seen} seen)", file=sys.stderr)
+        return 1
+    if args.json:
+        import json
+
+        print(json.dumps({"nodes": nodes, "status": st}, indent=1))
+        return 0
+    print(f"nodes: {', '.join(nodes)}")
+    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}), "
+          f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"
+          f" fallback {st['fallback']}, real-time factor {st['real_time_factor']}: "
+          f"{st['message']}")
+    return 0
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
+    sp = subparsers.add_parser("switch", help="hand control to another controller node")
+    sp.add_argument("controller", choices=CONTROLLERS)
+    sp.add_argument("--timeout", type=float, default=10.0,
+                    help="seconds to wait for the sim and the controller (default 10)")
+    sp.set_defaults(func=_cmd_switch)
+    st = subparsers.add_parser("status", help="what runs in the graph, mode, ticks")
+    st.add_argument("--timeout", type=float, default=5.0,
+                    help="seconds to wait for /hexapod/status (default 5)")
+    st.add_argument("--json", action="store_true", help="print JSON")
+    st.set_defaults(func=_cmd_status)
+
+
+__all__ = ["GraphError", "GraphProcesses", "NODES", "SIM_TIME_NODES", "add_parser",
+           "ensure_active", "status", "switch"]

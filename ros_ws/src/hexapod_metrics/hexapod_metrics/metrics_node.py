@@ -1,0 +1,251 @@
+"""Node ``metrics``: records every topic of the contract to a bag and scores each gait cycle.
+
+Recording: every topic is subscribed raw (serialized bytes, nothing deserialized on the
+way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCAP bag
+(:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
+``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
+(:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
+transient-local) and every parameter in the bag's ``custom_data``. The log time of a
+message is its stamp (simulated time); messages without a stamp (the active controller)
+get the latest ``/clock``. The node takes its messages in batches (``batch_interval``,
+default 5 ms) so that it does not compete with the control loop for the CPU; the queues
+(10000 messages per topic) cover seconds of lag. SIGINT and SIGTERM stop the node cleanly:
+the messages already received are taken and written, the bag is closed (summary and
+``metadata.yaml``) and ``indices.json`` is written. After a SIGKILL the bag stays readable
+up to its last flushed chunk (at most ~1 s of data lost).
+
+Indices: the seven indices (:func:`hexapod_metrics.core.indices.compute_indices`) of each gait
+cycle c, over the ticks k_a = c N .. k_b = (c + 1) N with N = T / Delta t (the sums run
+over samples 1..N, as in the in-process evaluation, see ``core/simulate.py``), are
+published on ``/hexapod/indices`` (one ``DiagnosticStatus`` per cycle, with the controller
+that produced the cycle's torques, or ``a->b`` if a switch fell inside it) and written to
+the bag. At close, ``indices.json`` in the bag directory lists every cycle and, per
+controller segment (a run of ticks with one controller in charge, from the states'
+frame_id), its full cycles and the last of them: the figure the paper reports.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from hexapod_sim import conversions as C
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.hot_loop import HotLoop, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_params
+
+from .core import cdr
+from .core.bag_writer import BagWriter
+from .core.errors import BagError
+from .core.indices import INDEX_NAMES, Indices, compute_indices
+from .core.recording import TOPICS, bag_custom_data, indices_status
+
+#: The state topics a cycle's indices need, all stamped per tick.
+CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
+
+
+def frame_of(data: bytes) -> str:
+    """header.frame_id of a serialized stamped message."""
+    n = int.from_bytes(data[12:16], "little")
+    return bytes(data[16:16 + n - 1]).decode() if n else ""
+
+
+class CycleScorer:
+    """Collects the per-tick messages of the state topics and scores each full gait cycle."""
+
+    def __init__(self, ticks_per_cycle: int, period: float) -> None:
+        self.n = ticks_per_cycle
+        self.period = period
+        self.period_ns = int(round(period * 1e9))
+        self.raw: dict[str, dict[int, bytes]] = {t: {} for t in CYCLE_TOPICS}
+        self.controller: dict[int, str] = {}  # tick -> controller in charge (states' frame)
+        self.next_cycle = 0
+        self.cycles: list[dict[str, Any]] = []
+        self.segments: list[dict[str, Any]] = []  # {controller, from_tick, to_tick}
+
+    def add(self, topic: str, stamp_ns: int, data: bytes) -> list[dict[str, Any]]:
+        """Store one message; return the cycles that became complete (scored)."""
+        k = C.tick_of(stamp_ns, self.period_ns)
+        if k < self.next_cycle * self.n:
+            return []
+        self.raw[topic][k] = data
+        if topic == T.JOINT_STATES:
+            ctrl = frame_of(data)
+            self.controller[k] = ctrl
+            seg = self.segments[-1] if self.segments else None
+            if seg is None or seg["controller"] != ctrl:
+                self.segments.append({"controller": ctrl, "from_tick": k, "to_tick": k})
+            else:
+                seg["to_tick"] = max(seg["to_tick"], k)
+        done = []
+        while True:
+            end = (self.next_cycle + 1) * self.n
+            if not all(end in self.raw[t] for t in CYCLE_TOPICS):
+                break
+            cycle = self._score(self.next_cycle)
+            if cycle is not None:
+                done.append(cycle)
+            self.next_cycle += 1
+            start = self.next_cycle * self.n
+            for buf in (*self.raw.values(), self.controller):
+                for old in [j for j in buf if j < start]:
+                    del buf[old]
+        return done
+
+    def _score(self, c: int) -> dict[str, Any] | None:
+        k_a, k_b = c * self.n, (c + 1) * self.n
+        ticks = range(k_a, k_b + 1)
+        arrays = {}
+        for t in CYCLE_TOPICS:
+            buf = self.raw[t]
+            if any(k not in buf for k in ticks):
+                return None  # a gap (not in lockstep): no indices for this cycle
+            arrays[t] = cdr.decode_joint_state_batch([buf[k] for k in ticks])
+        js, ff, hs, ref = (arrays[t] for t in CYCLE_TOPICS)
+        shape = (len(ticks), 6, 2)
+        r = T.split_reference(ref.position, ref.velocity)
+        idx = compute_indices(js.effort.reshape(shape), js.velocity.reshape(shape),
+                              hs.effort.reshape(shape), hs.position.reshape(shape), r["hip"],
+                              ff.position.reshape(shape), r["foot"], self.period)
+        # Sample k carries the torque of the command of tick k - 1.
+        ctrls = [self.controller.get(k, "") for k in range(k_a, k_b)]
+        names = [ctrls[0]] + [b for a, b in zip(ctrls, ctrls[1:]) if a != b]
+        return {"cycle": c, "t_a": k_a * self.period, "t_b": k_b * self.period,
+                "controller": "->".join(names), "indices": idx.as_dict()}
+
+    def report(self) -> dict[str, Any]:
+        """Every cycle and, per controller segment, its full cycles and the last one."""
+        segs = []
+        for s in self.segments:
+            full = [c for c in self.cycles if c["controller"] == s["controller"]
+                    and s["from_tick"] <= c["t_a"] / self.period + 0.5
+                    and c["t_b"] / self.period - 0.5 <= s["to_tick"] + 1]
+            segs.append({**s, "t_start": s["from_tick"] * self.period,
+                         "t_end": s["to_tick"] * self.period, "cycles": [c["cycle"] for c in full],
+                         "last_full_cycle": full[-1] if full else None})
+        return {"control_period": self.period, "ticks_per_cycle": self.n,
+                "index_names": list(INDEX_NAMES) + ["L"], "segments": segs,
+                "cycles": self.cycles}
+
+
+class MetricsNode(Node):
+    """Recorder and online scorer."""
+
+    def __init__(self) -> None:
+        super().__init__("metrics")
+        self.binding = ParamBinding(self, declare_params(self))
+        p = self.binding.params
+        default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
+        self.bag_path = Path(str(self.declare_parameter("bag_path", default).value) or default)
+        batch = float(self.declare_parameter("batch_interval", 0.005).value)
+        self.period = p.sim.control_period
+        self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
+        self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"))
+        self.writer.open()
+        for topic, (msgtype, _) in TOPICS.items():
+            self.writer.add_topic(topic, msgtype, C.TOPIC_QOS[topic].preset)
+        self.clock_ns = 0
+        self.counts = {t: 0 for t in TOPICS}
+        self.loop = HotLoop(self, batch_interval=batch)
+        self.pub_indices = self.create_publisher(DiagnosticArray, T.INDICES,
+                                                 C.TOPIC_QOS[T.INDICES].publisher())
+        for topic in TOPICS:
+            if topic in (T.INDICES, T.CLOCK):
+                continue
+            self._subscribe(topic)
+        self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
+        self.get_logger().info(f"recording to {self.bag_path}")
+
+    def _subscribe(self, topic: str) -> None:
+        q = C.TOPIC_QOS[topic]
+        if topic in CYCLE_TOPICS:
+            def cb(data: bytes, topic: str = topic) -> None:
+                stamp = C.decode_stamp(data)
+                self.writer.write(topic, stamp, data)
+                self.counts[topic] += 1
+                for cycle in self.scorer.add(topic, stamp, data):
+                    self._publish_cycle(cycle)
+        elif topic == T.CLOCK:
+            def cb(data: bytes, topic: str = topic) -> None:
+                self.clock_ns = max(self.clock_ns, C.decode_stamp(data))
+                self.writer.write(topic, C.decode_stamp(data), data)
+                self.counts[topic] += 1
+        elif topic == T.ACTIVE_CONTROLLER:
+            def cb(data: bytes, topic: str = topic) -> None:
+                self.writer.write(topic, self.clock_ns, data)
+                self.counts[topic] += 1
+                self.get_logger().info(f"controller in charge: {C.decode_string(data)} "
+                                       f"(sim time {self.clock_ns * 1e-9:.3f} s)")
+        else:  # stamped: joint_commands, status
+            def cb(data: bytes, topic: str = topic) -> None:
+                self.writer.write(topic, C.decode_stamp(data), data)
+                self.counts[topic] += 1
+        self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
+
+    def _publish_cycle(self, cycle: dict[str, Any]) -> None:
+        self.scorer.cycles.append(cycle)
+        idx = Indices(**cycle["indices"])
+        status = indices_status(idx, cycle["controller"], cycle["cycle"], cycle["t_a"],
+                                cycle["t_b"])
+        stamp = T.stamp_ns(cycle["t_b"])
+        data = cdr.encode_diagnostic_array(stamp, [status])
+        self.pub_indices.publish(data)
+        self.writer.write(T.INDICES, stamp, data)
+        self.counts[T.INDICES] += 1
+        self.get_logger().info(
+            f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
+            f"({cycle['controller']}): "
+            + ", ".join(f"{n} {cycle['indices'][n]:.4g}" for n in INDEX_NAMES))
+
+    def close(self) -> None:
+        """Take what is queued, close the bag, write indices.json; idempotent."""
+        if self.writer.closed:
+            return
+        try:
+            self.loop.drain()
+        finally:
+            self.writer.close()
+        report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report()}
+        (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
+        self.get_logger().info(
+            f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
+            f"{len(self.scorer.cycles)} cycles scored)")
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``metrics``."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    code = 0
+    try:
+        node = MetricsNode()
+        install_stop_signals(node.loop)
+        node.loop.spin()
+    except (HexapodError, BagError) as err:
+        rclpy.logging.get_logger("metrics").error(str(err))
+        code = 2 if isinstance(err, ParameterError) else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            try:
+                node.close()
+            finally:
+                node.loop.destroy()
+                node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

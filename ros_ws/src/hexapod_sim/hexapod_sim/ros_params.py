@@ -1,0 +1,140 @@
+"""The model's parameters as ROS parameters: declare, validate, apply.
+
+Every node declares every parameter of :data:`~hexapod_sim.core.params.SPECS` (one
+params file configures the whole graph: ``--ros-args --params-file``), with a
+descriptor built from the same table: description with units and allowed values,
+``FloatingPointRange``/``IntegerRange`` where both bounds are finite, and ``read_only``
+for everything that cannot change while the model runs. Only these change live:
+``ground.*``, ``actuator.*``, ``pd_p.*``, ``pd_pf.*``, ``run.controller`` and
+``sim.lockstep_timeout``, ``sim.hold_time``, ``sim.fallback_damping``.
+
+Validation is the engine's own (:func:`~hexapod_sim.core.params.check_value` for each value,
+:func:`~hexapod_sim.core.params.from_flat` for the cross-checks, e.g. a reachable gait), so
+the nodes, the in-process engine and the CLI accept and reject exactly the same values and
+say so with the same message: ``parameter 'actuator.t_max' = -5.0 is invalid: allowed float
+in (0, inf]``. A rejected runtime change leaves the node's value as it was; a bad value in
+the params file at start is reported by :func:`declare_params` as a
+:class:`~hexapod_sim.core.errors.ParameterError` (the node logs it and exits non-zero).
+
+Numbers are declared with dynamic typing so that ``400`` and ``400.0`` are both accepted (the
+validator converts); rclpy still rejects a value outside a finite descriptor range before
+our callback sees it, with its own message that names the parameter, the value and the
+range. ``T_max = inf`` (ideal actuators) is written ``.inf`` in a params file (rcl's
+parser also accepts ``inf``; both are read as float infinity) and ``-p actuator.t_max:=.inf``
+on a command line.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Callable
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterException)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from .core.errors import ParameterError
+from .core.params import SPECS, HexapodParams, Spec, check_value, from_flat, load_params
+
+#: Parameters (or groups, with a trailing '.') that may change while the graph runs.
+LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
+        "sim.hold_time", "sim.fallback_damping")
+
+
+def is_live(name: str) -> bool:
+    """True if ``name`` may change at runtime."""
+    return any(name == p or (p.endswith(".") and name.startswith(p)) for p in LIVE)
+
+
+def descriptor(name: str, spec: Spec) -> ParameterDescriptor:
+    """The ROS descriptor of one parameter, from its spec."""
+    d = ParameterDescriptor(
+        name=name, description=f"{spec.description}; {spec.allowed()}",
+        additional_constraints=f"allowed: {spec.allowed()}",
+        read_only=not is_live(name), dynamic_typing=True)
+    if spec.lo is not None and spec.hi is not None and math.isfinite(spec.hi):
+        if spec.kind is int:
+            d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi),
+                                            step=0)]
+        else:
+            d.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)]
+    return d
+
+
+def _override(node: Node, name: str) -> Any:
+    overrides = getattr(node, "_parameter_overrides", {})
+    param = overrides.get(name)
+    return None if param is None else param.value
+
+
+def declare_params(node: Node, defaults: HexapodParams | None = None) -> HexapodParams:
+    """Declare every model parameter on ``node``; return the validated parameters.
+
+    Values come from the node's overrides (params file, ``-p``), else from ``defaults``
+    (default: the shipped base experiment). Raises ParameterError naming the first bad one.
+    """
+    base = (defaults or load_params()).to_flat()
+    flat: dict[str, Any] = {}
+    for name, spec in SPECS.items():
+        try:
+            value = node.declare_parameter(name, base[name], descriptor(name, spec)).value
+        except (InvalidParameterTypeException, InvalidParameterValueException,
+                ParameterException) as err:
+            # rclpy's descriptor checks fired first: say it in the engine's words.
+            bad = _override(node, name)
+            check_value(name, bad)
+            raise ParameterError(name, bad, f"{spec.allowed()} ({err})") from err
+        flat[name] = check_value(name, value)
+    unknown = [n for n in getattr(node, "_parameter_overrides", {})
+               if "." in n and n.split(".")[0] in {k.split(".")[0] for k in SPECS}
+               and n not in SPECS]
+    for name in unknown:
+        node.get_logger().warning(f"params file: unknown parameter '{name}' ignored")
+    return from_flat(flat)
+
+
+class ParamBinding:
+    """Keeps a node's :class:`HexapodParams` in sync with its ROS parameters.
+
+    ``on_change(params, changed_names)`` runs after an accepted change (post-set callback).
+    """
+
+    def __init__(self, node: Node, params: HexapodParams,
+                 on_change: Callable[[HexapodParams, set[str]], None] | None = None) -> None:
+        self.node = node
+        self.params = params
+        self._on_change = on_change
+        node.add_on_set_parameters_callback(self._validate)
+        node.add_post_set_parameters_callback(self._apply)
+
+    def _merged(self, changes: list[Parameter]) -> HexapodParams:
+        flat = self.params.to_flat()
+        for p in changes:
+            if p.name in SPECS:
+                flat[p.name] = check_value(p.name, p.value)
+        return from_flat(flat)
+
+    def _validate(self, changes: list[Parameter]) -> SetParametersResult:
+        try:
+            self._merged(changes)
+        except ParameterError as err:
+            self.node.get_logger().warning(f"rejected: {err}")
+            return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _apply(self, changes: list[Parameter]) -> None:
+        names = {p.name for p in changes if p.name in SPECS}
+        if not names:
+            return
+        self.params = self._merged(changes)
+        for p in changes:
+            if p.name in names:
+                self.node.get_logger().info(f"parameter {p.name} = {p.value!r}")
+        if self._on_change is not None:
+            self._on_change(self.params, names)
+
+
+__all__ = ["LIVE", "ParamBinding", "declare_params", "descriptor", "is_live"]

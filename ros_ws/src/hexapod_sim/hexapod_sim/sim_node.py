@@ -1,0 +1,411 @@
+"""Node ``hexapod_sim``: integrates the model and closes the loop with the controller in charge.
+
+Per control tick k (stamp t_k = k * control period, the same on every message of the tick):
+
+1. publish ``/hexapod/joint_states`` (header.frame_id = the controller in charge),
+   ``/hexapod/foot_forces``, ``/hexapod/hip_states`` and ``/clock``: the sample of tick k
+   (engine.py's convention: state at t_k, torque T_{k-1} acting now);
+2. take the command of tick k from ``/hexapod/joint_commands`` (header.stamp = t_k,
+   header.frame_id = the controller in charge; others are ignored), saturate it
+   (actuator.saturate) and integrate one period holding it.
+
+This is exactly :func:`hexapod_control.core.closed_loop.run` split across processes, with
+the same compiled functions in the same order; float64 travels through CDR unchanged, so
+a lockstep run reproduces the in-process numbers.
+
+Modes (parameter ``sim.mode``):
+
+* ``lockstep`` (default): tick k+1 is published as soon as the command of tick k has been
+  applied (in the command's callback; no executor in between, see hot_loop.py). Without
+  a command within ``sim.lockstep_timeout`` wall seconds the tick counts as *missed*: the
+  last torque is held and the controller counts as silent. While silent, ticks wait one
+  control period each (real-time pacing, not the full timeout); after ``sim.hold_time``
+  simulated seconds of missed ticks the sim falls back to joint damping
+  T = -sim.fallback_damping * dtheta (saturated). The first valid command ends both.
+* ``realtime``: ticks are paced by the wall clock (tick k published at t0 + k * period);
+  at the end of each period the newest command of the controller in charge is applied.
+  A period whose own command did not arrive counts as *missed*; a command that arrives
+  after its period counts as *late*. Silence and fallback as in lockstep.
+
+Switching: setting ``run.controller`` (standard parameter service, e.g. ``hexapod switch``)
+takes effect at the next tick boundary: the next state message names the new controller,
+which answers it (it has buffered the reference and foot forces all along), so no tick is
+lost; the switch is published on ``/hexapod/active_controller`` (transient-local) and
+logged with its tick. Ground and actuator parameters change live at the next tick boundary.
+
+Start: tick 0 is published once the nodes named in ``wait_for`` show their endpoints in
+the graph and the sim's publishers and subscription are matched with them (at most
+``startup_timeout`` s, then it starts anyway and says what is missing). Stop: at
+``run.duration`` if ``stop_at_end`` (after publishing the last sample), or on
+SIGINT/SIGTERM; a summary line is logged either way. Divergence of the model is logged
+as an error and ends the process with exit code 1.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from . import conversions as C
+from .core import topics as T
+from .core.actuator import saturate
+from .core.engine import Physics
+from .core.errors import DivergenceError, HexapodError, ParameterError
+from .core.layout import O_THV, P_TMAX
+from .core.params import N_LEGS, HexapodParams
+from .hot_loop import HotLoop, install_stop_signals
+from .ros_params import ParamBinding, declare_params
+
+#: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
+EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "trajectory_generator": ((T.CLOCK,), (T.REFERENCE,)),
+    "pd_p_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
+    "pd_pf_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
+    "metrics": ((T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
+                 T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS), ()),
+}
+DEFAULT_WAIT_FOR = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
+STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
+RESYNC_TICKS = 20    # realtime: re-anchor the schedule when this many periods behind
+
+
+class SimNode(Node):
+    """The simulator: physics, tick publishing, command intake, modes, switch, fallback."""
+
+    def __init__(self) -> None:
+        super().__init__("hexapod_sim")
+        self.binding = ParamBinding(self, declare_params(self), self._on_params)
+        self.stop_at_end = bool(self.declare_parameter("stop_at_end", False).value)
+        wait_for = str(self.declare_parameter("wait_for", DEFAULT_WAIT_FOR).value)
+        self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
+        self.startup_timeout = float(self.declare_parameter("startup_timeout", 60.0).value)
+        p = self.params
+        self.mode = p.sim.mode
+        self.period = p.sim.control_period
+        self.period_ns = int(round(self.period * 1e9))
+        self.end_tick = int(round(p.run.duration / self.period))
+        self.physics = Physics(p)
+        self._warm_up()
+
+        self.loop = HotLoop(self)
+        self.codecs = C.CODECS
+        self.pub = {t: self.create_publisher(q.msg_type, t, q.publisher())
+                    for t, q in C.TOPIC_QOS.items()
+                    if t in (T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.STATUS,
+                             T.ACTIVE_CONTROLLER)}
+        self.cmd_sub = self.loop.subscribe(
+            JointState, T.JOINT_COMMANDS, self._on_command,
+            C.TOPIC_QOS[T.JOINT_COMMANDS].subscriber(C.CONTROL_DEPTH))
+        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(STATUS_PERIOD, self._publish_status, clock=self.steady)
+
+        self.in_charge = p.run.controller
+        self.pending_controller: str | None = None
+        self.pending_params: HexapodParams | None = None
+        self.torque = np.zeros((N_LEGS, 2))
+        self.obs = self.physics.observe()
+        self.stamp = -1
+        self.answered = False
+        self.newest: np.ndarray | None = None  # realtime: newest command not yet applied
+        self.started = False
+        self.finished = False
+        self.missed = self.late = self.on_time = self.foreign = self.resyncs = 0
+        self.silent_ticks = 0
+        self.fallback = False
+        self.fallback_episodes = 0
+        self.switches = 0
+        self.t0 = 0.0
+        self.wall_start = 0.0
+        self._rtf = (time.monotonic(), 0)
+        self.rtf = 0.0
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def params(self) -> HexapodParams:
+        """The node's current (validated) parameters."""
+        return self.binding.params
+
+    def _warm_up(self) -> None:
+        """Run the compiled functions once so tick 0 does not pay for loading them."""
+        probe = Physics(self.params)
+        probe.observe()
+        out = np.empty((N_LEGS, 2))
+        saturate(np.zeros((N_LEGS, 2)), 1.0, out)
+        probe.advance_tick(out)
+
+    def _on_params(self, p: HexapodParams, names: set[str]) -> None:
+        if "run.controller" in names and p.run.controller != self.in_charge:
+            self.pending_controller = p.run.controller
+            self.get_logger().info(f"switch to {p.run.controller} requested: takes effect at "
+                                   f"the next tick boundary")
+        if any(n.startswith(("ground.", "actuator.")) for n in names):
+            self.pending_params = p
+
+    # ------------------------------------------------------------------ start
+    def graph_missing(self) -> list[str]:
+        """What is still missing before tick 0 may be published (empty when ready)."""
+        missing = []
+        for node in self.wait_for:
+            subs, pubs = EXPECTED_ENDPOINTS.get(node, ((), ()))
+            if node not in self.get_node_names():
+                missing.append(f"node {node}")
+                continue
+            for topic in subs:
+                infos = self.get_subscriptions_info_by_topic(topic)
+                if not any(i.node_name == node and (
+                        topic != T.CLOCK or i.qos_profile.reliability
+                        == ReliabilityPolicy.RELIABLE) for i in infos):
+                    missing.append(f"{node} subscribing to {topic}")
+            for topic in pubs:
+                if not any(i.node_name == node for i in self.get_publishers_info_by_topic(topic)):
+                    missing.append(f"{node} publishing {topic}")
+        for topic, pub in self.pub.items():
+            if pub.get_subscription_count() < self.count_subscribers(topic):
+                missing.append(f"matching of {topic}")
+        if self.cmd_sub.get_publisher_count() < self.count_publishers(T.JOINT_COMMANDS):
+            missing.append(f"matching of {T.JOINT_COMMANDS}")
+        return missing
+
+    def start(self) -> None:
+        """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
+        self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
+        if self.wait_for:
+            self.get_logger().info(f"waiting for {', '.join(self.wait_for)} "
+                                   f"(at most {self.startup_timeout:g} s)")
+            ready = self.loop.spin(until=lambda: not self.graph_missing(),
+                                   timeout=self.startup_timeout)
+            if self.loop.stopped:
+                return
+            if not ready:
+                self.get_logger().error(
+                    f"starting without: {'; '.join(self.graph_missing())} (not there after "
+                    f"{self.startup_timeout:g} s: check that those nodes run on this "
+                    f"ROS_DOMAIN_ID)")
+        self.get_logger().info(
+            f"{self.mode} mode, {1 / self.period:g} Hz control, {self.in_charge} in charge, "
+            f"run.duration {self.params.run.duration:g} s"
+            + (" (stops there)" if self.stop_at_end else " (runs until stopped)"))
+        self.started = True
+        self.wall_start = self.t0 = time.monotonic()
+        self._rtf = (self.wall_start, 0)
+        self._publish_tick()
+
+    # ------------------------------------------------------------------ ticks
+    def _publish_tick(self) -> None:
+        k = self.physics.tick
+        self.obs = obs = self.physics.observe()
+        self.stamp = stamp = T.stamp_ns(k * self.period)
+        self.answered = False
+        cs = self.codecs
+        # Foot forces first: the controller needs them with the joint states that wake it.
+        for topic, frame in ((T.FOOT_FORCES, ""), (T.JOINT_STATES, self.in_charge),
+                             (T.HIP_STATES, "")):
+            c = T.state_columns(obs, topic)
+            self.pub[topic].publish(cs[topic].encode(stamp, frame, c.position, c.velocity,
+                                                     c.effort))
+        self.pub[T.CLOCK].publish(C.encode_clock(stamp))
+        if self.stop_at_end and k >= self.end_tick:
+            self.finished = True
+            self.loop.set_deadline(None)
+            self.loop.stop()
+            return
+        now = time.monotonic()
+        if self.mode == "lockstep":
+            wait = self.period if self.silent_ticks else self.params.sim.lockstep_timeout
+            self.loop.set_deadline(now + wait, self._on_timeout)
+        else:
+            due = self.t0 + (k + 1) * self.period
+            if now - due > RESYNC_TICKS * self.period:
+                self.resyncs += 1
+                self.t0 = now - k * self.period
+                due = now + self.period
+            self.loop.set_deadline(due, self._on_period_end)
+
+    def _on_command(self, data: bytes) -> None:
+        cmd = self.codecs[T.JOINT_COMMANDS].decode(data)
+        if cmd.frame_id != self.in_charge:
+            self.foreign += 1
+            return
+        if cmd.stamp_ns != self.stamp or self.answered or not self.started:
+            if cmd.stamp_ns < self.stamp:
+                self.late += 1
+                if self.mode == "realtime":
+                    self.newest = cmd.effort.reshape(N_LEGS, 2).copy()
+            return
+        self.answered = True
+        demand = cmd.effort.reshape(N_LEGS, 2)
+        if self.mode == "lockstep":
+            self._advance(demand)
+        else:
+            self.on_time += 1
+            self.newest = demand.copy()
+
+    def _on_timeout(self) -> None:
+        """Lockstep: no command for the current tick in time."""
+        self.missed += 1
+        self._count_silent()
+        self._advance(None)
+
+    def _on_period_end(self) -> None:
+        """Realtime: the period of the current tick is over; apply the newest command."""
+        if not self.answered:
+            self.missed += 1
+        demand, self.newest = self.newest, None
+        if demand is None:
+            self._count_silent()
+        elif self.silent_ticks:
+            self._controller_back()
+        self._advance(demand, realtime=True)
+
+    def _count_silent(self) -> None:
+        """One more period without any command: hold, then fall back after sim.hold_time."""
+        self.silent_ticks += 1
+        k = self.physics.tick
+        if self.silent_ticks == 1:
+            self.get_logger().warning(
+                f"no command from {self.in_charge} for tick {k} (t = {k * self.period:.3f} s): "
+                f"holding the last torque")
+        hold = self.params.sim.hold_time
+        if not self.fallback and self.silent_ticks * self.period >= hold - 1e-12:
+            self.fallback = True
+            self.fallback_episodes += 1
+            self.get_logger().error(
+                f"{self.in_charge} silent for {self.silent_ticks} ticks ({hold:g} s): falling "
+                f"back to joint damping ({self.params.sim.fallback_damping:g} N m s/rad) "
+                f"from tick {k}")
+
+    def _controller_back(self) -> None:
+        k = self.physics.tick
+        self.get_logger().info(
+            f"{self.in_charge} answers again at tick {k} after {self.silent_ticks} missed ticks"
+            + ("; leaving the damping fallback" if self.fallback else ""))
+        self.silent_ticks = 0
+        self.fallback = False
+
+    def _advance(self, demand: np.ndarray | None, realtime: bool = False) -> None:
+        """Apply a command (or hold / fall back), integrate one period, publish the next tick."""
+        P = self.physics.P
+        if demand is not None:
+            if self.silent_ticks and not realtime:
+                self._controller_back()
+            saturate(demand, P[P_TMAX], self.torque)
+        elif self.fallback:
+            damping = -self.params.sim.fallback_damping * self.obs[O_THV]
+            saturate(damping, P[P_TMAX], self.torque)
+        # else: hold self.torque, the torque applied over the last period
+        self.physics.advance_tick(self.torque)
+        if self.pending_params is not None:
+            self.physics.set_params(self.pending_params)
+            self.pending_params = None
+        if self.pending_controller is not None:
+            old, self.in_charge = self.in_charge, self.pending_controller
+            self.pending_controller = None
+            self.switches += 1
+            self.silent_ticks = 0
+            k = self.physics.tick
+            self.get_logger().info(f"switched {old} -> {self.in_charge} at tick {k} "
+                                   f"(t = {k * self.period:.3f} s)")
+            self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
+        self._publish_tick()
+
+    # ------------------------------------------------------------------ status
+    def status(self) -> C.Status:
+        """The sim's diagnostic status (also logged as the summary)."""
+        now = time.monotonic()
+        k = self.physics.tick
+        last_wall, last_tick = self._rtf
+        if now - last_wall > 1e-3:
+            self.rtf = (k - last_tick) * self.period / (now - last_wall)
+        self._rtf = (now, k)
+        if not self.started:
+            level, msg = "warn", "waiting for the graph"
+        elif self.fallback:
+            level, msg = "error", f"{self.in_charge} silent: joint damping fallback"
+        elif self.silent_ticks:
+            level, msg = "warn", f"{self.in_charge} silent: holding the last torque"
+        elif self.finished:
+            level, msg = "ok", "finished"
+        else:
+            level, msg = "ok", "running"
+        values = {
+            "mode": self.mode, "sim_time": f"{k * self.period:.6f}", "tick": str(k),
+            "controller": self.in_charge, "missed_ticks": str(self.missed),
+            "late_ticks": str(self.late), "on_time_ticks": str(self.on_time),
+            "fallback": "on" if self.fallback else "off",
+            "fallback_episodes": str(self.fallback_episodes),
+            "switches": str(self.switches), "real_time_factor": f"{self.rtf:.3f}",
+            "resyncs": str(self.resyncs), "end_tick": str(self.end_tick),
+            "stop_at_end": str(self.stop_at_end).lower(),
+        }
+        return C.Status("hexapod_sim", level, msg, values)
+
+    def _publish_status(self) -> None:
+        msg: DiagnosticArray = C.diagnostic_array(self.stamp if self.stamp >= 0 else 0,
+                                                  [self.status()])
+        self.pub[T.STATUS].publish(msg)
+
+    def summary(self) -> str:
+        """One line: what ran, how many ticks were missed or late."""
+        k = self.physics.tick
+        wall = time.monotonic() - self.wall_start if self.started else 0.0
+        rtf = k * self.period / wall if wall > 0 else 0.0
+        return (f"stopped at tick {k} (t = {k * self.period:.3f} s) in {self.mode} mode: "
+                f"{self.missed} missed, {self.late} late, {self.on_time} on time (realtime), "
+                f"{self.fallback_episodes} fallback episodes, {self.switches} switches, "
+                f"{self.resyncs} resyncs; wall {wall:.2f} s, real-time factor {rtf:.3f}")
+
+    def flush(self, timeout: float = 2.0) -> None:
+        """Wait (at most ``timeout`` s in all) until subscribers acknowledged every message."""
+        end = time.monotonic() + timeout
+        for pub in self.pub.values():
+            left = max(0.0, end - time.monotonic())
+            pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``hexapod_sim``."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    code = 0
+    try:
+        node = SimNode()
+        install_stop_signals(node.loop)
+        node.start()
+        node.loop.spin()
+    except ParameterError as err:
+        rclpy.logging.get_logger("hexapod_sim").error(str(err))
+        code = 2
+    except DivergenceError as err:
+        if node is not None:
+            node.get_logger().error(f"{err}: stopping")
+        code = 1
+    except HexapodError as err:
+        rclpy.logging.get_logger("hexapod_sim").error(str(err))
+        code = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if node.started:
+                node.get_logger().info(node.summary())
+                node._publish_status()
+            node.flush()
+            node.loop.destroy()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

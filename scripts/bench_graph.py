@@ -1,0 +1,111 @@
+#!/usr/bin/env python3
+"""Benchmarks S4 and S5 of the node graph (docs/benchmarks.md, quality.md "Speed").
+
+S4: lockstep mode, 1 kHz control, recording on (all five nodes): real-time factor =
+    simulated seconds / wall seconds of a --duration run (default 10 s), median of --runs
+    (default 3). The wall time runs from tick 0 to the last tick, as the sim reports it.
+S5: realtime mode, 1 kHz, all five nodes: percentage of ticks whose command arrived
+    within its period, over --duration seconds (median of --runs).
+
+Each run starts a fresh graph on its own ROS_DOMAIN_ID and prints the CPU seconds every
+node used, so a slow figure says where the time went.
+
+Usage: scripts/bench_graph.py [--runs 3] [--duration 10] [--only s4|s5]
+(run through `scripts/env.sh`, or it re-executes itself inside it).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _reexec_in_env() -> None:
+    if os.environ.get("VIRTUAL_ENV") == str(ROOT / ".venv"):
+        return
+    subprocess.run([str(ROOT / "scripts" / "setup.sh"), "--quiet"], check=True)
+    cmd = f'source "{ROOT}/scripts/env.sh" && exec python "$0" "$@"'
+    os.execvp("bash", ["bash", "-c", cmd, __file__, *sys.argv[1:]])
+
+
+SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time"
+                     r".*wall ([\d.]+) s, real-time factor ([\d.]+)")
+NODES = ("metrics", "trajectory_generator", "pd_p_controller", "pd_pf_controller")
+CPU_COLUMNS = ("hexapod_sim",) + NODES
+
+
+def run_graph(mode: str, duration: float, domain: int, log_dir: Path) -> dict[str, float]:
+    """One graph run; the sim's summary figures and each node's CPU seconds."""
+    from hexapod_metrics.cmd_graph import GraphProcesses
+
+    g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)})
+    try:
+        g.start("metrics", f"bag_path:={log_dir / 'bag'}")
+        for name in NODES[1:]:
+            g.start(name)
+        g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+                f"sim.mode:={mode}")
+        g.wait_log("hexapod_sim", "real-time factor", timeout=duration * 20 + 120)
+        cpu = {n: g.cpu_seconds(n) for n in NODES}
+        try:
+            cpu["hexapod_sim"] = g.cpu_seconds("hexapod_sim")
+        except (OSError, IndexError):  # already gone
+            cpu["hexapod_sim"] = float("nan")
+        g.wait_exit("hexapod_sim", 30)
+    finally:
+        g.stop_all(order=("trajectory_generator", "pd_p_controller", "pd_pf_controller",
+                          "metrics"))
+    m = SUMMARY.search(g.log("hexapod_sim"))
+    if m is None:
+        raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
+    ticks, missed, late, on_time = (int(x) for x in m.groups()[:4])
+    return {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
+            "wall": float(m.group(5)), "rtf": float(m.group(6)), **{f"cpu_{n}": c for n, c
+                                                                  in cpu.items()}}
+
+
+def main() -> int:
+    _reexec_in_env()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=10.0)
+    ap.add_argument("--only", choices=("s4", "s5"))
+    args = ap.parse_args()
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}")
+    base = 150 + os.getpid() % 80
+    with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
+        for key, mode in (("s4", "lockstep"), ("s5", "realtime")):
+            if args.only and args.only != key:
+                continue
+            rows = []
+            for i in range(args.runs):
+                r = run_graph(mode, args.duration, (base + 2 * i + (key == "s5")) % 101 + 1,
+                              Path(tmp) / f"{key}_{i}")
+                rows.append(r)
+                cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
+                print(f"{key} run {i + 1}: {r['ticks']} ticks, wall {r['wall']:.2f} s, "
+                      f"real-time factor {r['rtf']:.3f}, missed {r['missed']}, late "
+                      f"{r['late']}, on time {r['on_time']}; CPU s: {cpu}", flush=True)
+            if key == "s4":
+                med = statistics.median(r["rtf"] for r in rows)
+                print(f"S4 lockstep real-time factor (1 kHz, recording on), median of "
+                      f"{len(rows)}: {med:.3f}  (target >= 1.0)")
+            else:
+                pct = [100.0 * r["on_time"] / max(r["ticks"], 1) for r in rows]
+                print(f"S5 realtime ticks on time (1 kHz), median of {len(rows)}: "
+                      f"{statistics.median(pct):.2f} %  (target >= 99 %); missed "
+                      f"{[r['missed'] for r in rows]}, late {[r['late'] for r in rows]}")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
