@@ -67,7 +67,10 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path) -> dict[st
     if m is None:
         raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
     ticks, missed, late, on_time = (int(x) for x in m.groups()[:4])
+    rt = re.search(r"round trip median ([\d.na]+) ms, p99 ([\d.na]+) ms", g.log("hexapod_sim"))
     return {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
+            "rt_median": float(rt.group(1)) if rt else float("nan"),
+            "rt_p99": float(rt.group(2)) if rt else float("nan"),
             "wall": float(m.group(5)), "rtf": float(m.group(6)), **{f"cpu_{n}": c for n, c
                                                                   in cpu.items()}}
 
@@ -93,7 +96,8 @@ def main() -> int:
                 cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
                 print(f"{key} run {i + 1}: {r['ticks']} ticks, wall {r['wall']:.2f} s, "
                       f"real-time factor {r['rtf']:.3f}, missed {r['missed']}, late "
-                      f"{r['late']}, on time {r['on_time']}; CPU s: {cpu}", flush=True)
+                      f"{r['late']}, on time {r['on_time']}, round trip median "
+                      f"{r['rt_median']:.2f} ms p99 {r['rt_p99']:.2f} ms; CPU s: {cpu}", flush=True)
             if key == "s4":
                 med = statistics.median(r["rtf"] for r in rows)
                 print(f"S4 lockstep real-time factor (1 kHz, recording on), median of "

@@ -35,8 +35,8 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.hot_loop import HotLoop, install_stop_signals
-from hexapod_sim.ros_params import ParamBinding, declare_params
+from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
 
@@ -51,7 +51,8 @@ class ControllerNode(LifecycleNode):
         self.code = controller_code(architecture)
         super().__init__(f"{architecture}_controller")
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
-        self.autostart = bool(self.declare_parameter("autostart", True).value)
+        self.autostart = declare_node_param(self, "autostart", True,
+                                            "configure and activate at start")
         self.loop = HotLoop(self)
         self.js_codec = C.CODECS[T.JOINT_STATES]
         self.ff_codec = C.CODECS[T.FOOT_FORCES]
@@ -158,8 +159,8 @@ class ControllerNode(LifecycleNode):
         """A state: ours to answer if it names this controller (and we are active).
 
         Reference and foot forces do not wake the loop (hot_loop.py): they queue in their
-        subscriptions (100 deep) and are taken here, when a state needs them; only if one
-        is still missing do they wake the loop until the answer is out.
+        subscriptions (conversions.CONTROL_DEPTH deep) and are taken here, when a state
+        needs them; only if one is still missing do they wake the loop until it is there.
         """
         js = self.js_codec.decode(data)
         if js.frame_id != self.arch or not self.active:
@@ -203,6 +204,7 @@ class ControllerNode(LifecycleNode):
 
 
 def _main(architecture: str, args: list[str] | None) -> int:
+    configure_middleware()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0

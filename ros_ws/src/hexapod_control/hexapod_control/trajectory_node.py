@@ -28,10 +28,10 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.hot_loop import HotLoop, install_stop_signals
-from hexapod_sim.ros_params import ParamBinding, declare_params
+from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
-BLOCK_TICKS = 1000  # references computed per block
+BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
 
 
 class TrajectoryNode(Node):
@@ -40,14 +40,15 @@ class TrajectoryNode(Node):
     def __init__(self) -> None:
         super().__init__("trajectory_generator")
         self.binding = ParamBinding(self, declare_params(self))
-        self.lookahead = int(self.declare_parameter("lookahead", 1).value)
+        self.lookahead = declare_node_param(self, "lookahead", 1,
+                                            "ticks published ahead of the clock")
         if self.lookahead < 0:
             raise ParameterError("lookahead", self.lookahead, "an int >= 0")
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))
         self.codec = C.CODECS[T.REFERENCE]
-        self.block: tuple[int, Reference] | None = None
+        self.blocks: dict[int, Reference] = {}
         self.next_tick = 0  # first tick not yet published
         self.loop = HotLoop(self)
         self.pub = self.create_publisher(JointState, T.REFERENCE,
@@ -56,12 +57,18 @@ class TrajectoryNode(Node):
         self.loop.subscribe(Clock, T.CLOCK, self._on_clock,
                             C.TOPIC_QOS[T.CLOCK].subscriber(C.CONTROL_DEPTH))
 
+    def _block(self, b: int) -> Reference:
+        ref = self.blocks.get(b)
+        if ref is None:
+            t = np.arange(b * BLOCK_TICKS, (b + 1) * BLOCK_TICKS) * self.period
+            ref = self.blocks[b] = reference(self.binding.params, t)
+            for old in [x for x in self.blocks if x < b - 1]:
+                del self.blocks[old]
+        return ref
+
     def _reference_of(self, k: int) -> T.Columns:
-        if self.block is None or not 0 <= k - self.block[0] < BLOCK_TICKS:
-            t = np.arange(k, k + BLOCK_TICKS) * self.period
-            self.block = (k, reference(self.binding.params, t))
-        k0, ref = self.block
-        i = k - k0
+        ref = self._block(k // BLOCK_TICKS)
+        i = k % BLOCK_TICKS
         return T.reference_columns(ref.theta[i], ref.theta_vel[i], ref.hip[i], ref.hip_vel[i],
                                    ref.foot[i], ref.foot_vel[i])
 
@@ -75,10 +82,14 @@ class TrajectoryNode(Node):
             self.pub.publish(self.codec.encode(T.stamp_ns(j * self.period), "", c.position,
                                                c.velocity, c.effort))
         self.next_tick = max(self.next_tick, k + self.lookahead + 1)
+        last = self.next_tick - 1
+        if last % BLOCK_TICKS >= BLOCK_TICKS // 2:  # past half a block: prepare the next
+            self._block(last // BLOCK_TICKS + 1)
 
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``trajectory_generator``."""
+    configure_middleware()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0

@@ -34,8 +34,14 @@ NODES: dict[str, tuple[str, str]] = {
     "pd_pf_controller": ("hexapod_control.controller_node", "main_pd_pf"),
     "metrics": ("hexapod_metrics.metrics_node", "main"),
 }
-#: Nodes that run on simulated time (``-p use_sim_time:=true``).
-SIM_TIME_NODES = tuple(os.environ.get("HX_SIM_TIME_NODES", "trajectory_generator,pd_p_controller,pd_pf_controller,metrics").split(","))
+#: Scheduling niceness per node: the recorder yields the CPU to the control loop (it only
+#: has to keep up on average; its queues absorb seconds of lag).
+NICE = {"metrics": 10}
+#: Nodes that may run on simulated time (``-p use_sim_time:=true`` with ``use_sim_time``).
+#: None of them reads ROS time (they work on the messages' stamps), and each /clock
+#: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is
+#: off by default.
+SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
 
 
 class GraphError(HexapodError):
@@ -49,32 +55,40 @@ class GraphProcesses:
     """Start, watch and stop node processes of one graph (one ROS_DOMAIN_ID).
 
     ``env`` adds to the current environment (set ``ROS_DOMAIN_ID`` there); every node gets
-    ``--params-file params`` if given and its log in ``log_dir/<name>.log``.
+    ``--params-file params`` if given and its log in ``log_dir/<name>.log``;
+    ``use_sim_time`` passes ``use_sim_time:=true`` to the nodes of :data:`SIM_TIME_NODES`;
+    ``overrides`` (``"name:=value"``) go to every node.
     """
 
     def __init__(self, log_dir: str | os.PathLike[str], params: str | None = None,
-                 env: dict[str, str] | None = None) -> None:
+                 env: dict[str, str] | None = None, use_sim_time: bool = False,
+                 overrides: Sequence[str] = ()) -> None:
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.params = params
+        self.use_sim_time = use_sim_time
+        self.overrides = tuple(overrides)
         self.env = {**os.environ, **(env or {})}
         self.env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         self.env["PYTHONUNBUFFERED"] = "1"
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
 
-    def start(self, name: str, *overrides: str, node: str | None = None) -> subprocess.Popen[bytes]:
+    def start(self, name: str, *overrides: str, node: str | None = None,
+              nice: int | None = None) -> subprocess.Popen[bytes]:
         """Start node ``node`` (default ``name``) as process ``name`` with ``-p`` overrides
-        (``"stop_at_end:=true"``)."""
+        (``"stop_at_end:=true"``); ``nice`` defaults to :data:`NICE` of the node."""
         node = node or name
         module, func = NODES[node]
-        args = [sys.executable, "-c",
+        nice = NICE.get(node, 0) if nice is None else nice
+        args = ["nice", "-n", str(nice)] if nice else []
+        args += [sys.executable, "-c",
                 f"import sys; from {module} import {func}; sys.exit({func}())", "--ros-args"]
         if self.params:
             args += ["--params-file", str(self.params)]
-        if node in SIM_TIME_NODES:
+        if self.use_sim_time and node in SIM_TIME_NODES:
             args += ["-p", "use_sim_time:=true"]
-        for o in overrides:
+        for o in self.overrides + overrides:
             args += ["-p", o]
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log

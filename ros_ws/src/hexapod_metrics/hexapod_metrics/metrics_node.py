@@ -31,7 +31,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
@@ -41,8 +40,8 @@ from rclpy.signals import SignalHandlerOptions
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.hot_loop import HotLoop, install_stop_signals
-from hexapod_sim.ros_params import ParamBinding, declare_params
+from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
 from .core.bag_writer import BagWriter
@@ -70,15 +69,19 @@ class CycleScorer:
         self.raw: dict[str, dict[int, bytes]] = {t: {} for t in CYCLE_TOPICS}
         self.controller: dict[int, str] = {}  # tick -> controller in charge (states' frame)
         self.next_cycle = 0
+        self.latest = -1  # newest tick seen
         self.cycles: list[dict[str, Any]] = []
         self.segments: list[dict[str, Any]] = []  # {controller, from_tick, to_tick}
 
     def add(self, topic: str, stamp_ns: int, data: bytes) -> list[dict[str, Any]]:
         """Store one message; return the cycles that became complete (scored)."""
         k = C.tick_of(stamp_ns, self.period_ns)
+        if self.latest < 0:  # joined mid-run: start with the first cycle seen from its start
+            self.next_cycle = -(-k // self.n)
         if k < self.next_cycle * self.n:
             return []
         self.raw[topic][k] = data
+        self.latest = max(self.latest, k)
         if topic == T.JOINT_STATES:
             ctrl = frame_of(data)
             self.controller[k] = ctrl
@@ -90,11 +93,13 @@ class CycleScorer:
         done = []
         while True:
             end = (self.next_cycle + 1) * self.n
-            if not all(end in self.raw[t] for t in CYCLE_TOPICS):
+            if all(end in self.raw[t] for t in CYCLE_TOPICS):
+                cycle = self._score(self.next_cycle)
+                if cycle is not None:
+                    done.append(cycle)
+            elif self.latest <= end + self.n:
                 break
-            cycle = self._score(self.next_cycle)
-            if cycle is not None:
-                done.append(cycle)
+            # else: a whole cycle later the end of this one is still missing: skip it
             self.next_cycle += 1
             start = self.next_cycle * self.n
             for buf in (*self.raw.values(), self.controller):
@@ -126,12 +131,15 @@ class CycleScorer:
     def report(self) -> dict[str, Any]:
         """Every cycle and, per controller segment, its full cycles and the last one."""
         segs = []
-        for s in self.segments:
+        for i, s in enumerate(self.segments):
             full = [c for c in self.cycles if c["controller"] == s["controller"]
                     and s["from_tick"] <= c["t_a"] / self.period + 0.5
                     and c["t_b"] / self.period - 0.5 <= s["to_tick"] + 1]
-            segs.append({**s, "t_start": s["from_tick"] * self.period,
-                         "t_end": s["to_tick"] * self.period, "cycles": [c["cycle"] for c in full],
+            # A segment lasts until the next one starts (its last command acts until then).
+            end = (self.segments[i + 1]["from_tick"] if i + 1 < len(self.segments)
+                   else s["to_tick"])
+            segs.append({**s, "t_start": s["from_tick"] * self.period, "t_end": end * self.period,
+                         "cycles": [c["cycle"] for c in full],
                          "last_full_cycle": full[-1] if full else None})
         return {"control_period": self.period, "ticks_per_cycle": self.n,
                 "index_names": list(INDEX_NAMES) + ["L"], "segments": segs,
@@ -146,8 +154,10 @@ class MetricsNode(Node):
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
-        self.bag_path = Path(str(self.declare_parameter("bag_path", default).value) or default)
-        batch = float(self.declare_parameter("batch_interval", 0.005).value)
+        self.bag_path = Path(declare_node_param(self, "bag_path", default,
+                                                "bag directory (must not exist)") or default)
+        batch = declare_node_param(self, "batch_interval", 0.005,
+                                   "s between two takes of the queued messages")
         self.period = p.sim.control_period
         self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
         self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"))
@@ -224,6 +234,7 @@ class MetricsNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``metrics``."""
+    configure_middleware()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0

@@ -43,8 +43,10 @@ _STAMP = struct.Struct("<iI")
 HISTORY_DEPTH = 5000
 #: Depth of the recorder's subscriptions (reader-side queue between two takes).
 RECORD_DEPTH = 10000
-#: Depth of the controllers' and trajectory generator's subscriptions.
-CONTROL_DEPTH = 100
+#: Depth of the controllers' and trajectory generator's subscriptions (a controller that is
+#: not in charge lets its queues of reference and foot forces roll over, and takes them all
+#: when it is put in charge: keep that short).
+CONTROL_DEPTH = 10
 
 
 def _qos(depth: int, transient: bool = False) -> QoSProfile:

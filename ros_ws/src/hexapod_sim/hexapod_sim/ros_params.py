@@ -96,6 +96,27 @@ def declare_params(node: Node, defaults: HexapodParams | None = None) -> Hexapod
     return from_flat(flat)
 
 
+def declare_node_param(node: Node, name: str, default: Any, description: str) -> Any:
+    """Declare a node's own (non-model) parameter; the value converted to the default's type.
+
+    Declared with dynamic typing so that ``3`` is accepted where ``3.0`` is meant; a value
+    that cannot be converted raises ParameterError.
+    """
+    kind = type(default)
+    value = node.declare_parameter(name, default, ParameterDescriptor(
+        name=name, description=description, dynamic_typing=True)).value
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(name, value, "true or false")
+        return value
+    if kind in (int, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                kind is int and isinstance(value, float) and not value.is_integer()):
+            raise ParameterError(name, value, f"a number ({kind.__name__})")
+        return kind(value)
+    return str(value)
+
+
 class ParamBinding:
     """Keeps a node's :class:`HexapodParams` in sync with its ROS parameters.
 
@@ -137,4 +158,5 @@ class ParamBinding:
             self._on_change(self.params, names)
 
 
-__all__ = ["LIVE", "ParamBinding", "declare_params", "descriptor", "is_live"]
+__all__ = ["LIVE", "ParamBinding", "declare_node_param", "declare_params", "descriptor",
+           "is_live"]

@@ -33,6 +33,9 @@ which answers it (it has buffered the reference and foot forces all along), so n
 lost; the switch is published on ``/hexapod/active_controller`` (transient-local) and
 logged with its tick. Ground and actuator parameters change live at the next tick boundary.
 
+A switch can also be scripted: parameters ``switch_at`` (simulated s) and ``switch_to``
+make the sim set its own ``run.controller`` at that tick (scripts/run_graph.sh uses it).
+
 Start: tick 0 is published once the nodes named in ``wait_for`` show their endpoints in
 the graph and the sim's publishers and subscription are matched with them (at most
 ``startup_timeout`` s, then it starts anyway and says what is missing). Stop: at
@@ -52,6 +55,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
@@ -63,9 +67,9 @@ from .core.actuator import saturate
 from .core.engine import Physics
 from .core.errors import DivergenceError, HexapodError, ParameterError
 from .core.layout import O_THV, P_TMAX
-from .core.params import N_LEGS, HexapodParams
-from .hot_loop import HotLoop, install_stop_signals
-from .ros_params import ParamBinding, declare_params
+from .core.params import N_LEGS, HexapodParams, check_controller
+from .hot_loop import HotLoop, configure_middleware, install_stop_signals
+from .ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -78,6 +82,9 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 DEFAULT_WAIT_FOR = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 RESYNC_TICKS = 20    # realtime: re-anchor the schedule when this many periods behind
+SWITCH_WINDOW = 3    # ticks after a switch whose misses count as caused by it
+LATENCY_BIN = 20e-6  # s: histogram of state -> command round trips, bins of 20 us ...
+LATENCY_BINS = 2500  # ... up to 50 ms (the last bin collects the rest)
 
 
 class SimNode(Node):
@@ -86,10 +93,23 @@ class SimNode(Node):
     def __init__(self) -> None:
         super().__init__("hexapod_sim")
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
-        self.stop_at_end = bool(self.declare_parameter("stop_at_end", False).value)
-        wait_for = str(self.declare_parameter("wait_for", DEFAULT_WAIT_FOR).value)
+        self.stop_at_end = declare_node_param(
+            self, "stop_at_end", False, "stop (and exit) after the tick at run.duration")
+        wait_for = declare_node_param(
+            self, "wait_for", DEFAULT_WAIT_FOR,
+            "comma-separated nodes whose endpoints must be matched before tick 0 ('' = none)")
         self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
-        self.startup_timeout = float(self.declare_parameter("startup_timeout", 60.0).value)
+        self.startup_timeout = declare_node_param(
+            self, "startup_timeout", 60.0, "wall s to wait for wait_for, then start anyway")
+        # A scripted switch (scripts/run_graph.sh): at the first tick at or after switch_at
+        # (sim s), the sim sets its own run.controller to switch_to, exactly as a
+        # `hexapod switch` would; deterministic, so the run can be reproduced.
+        self.switch_at = declare_node_param(self, "switch_at", -1.0,
+                                            "simulated s of a scripted switch")
+        self.switch_to = declare_node_param(self, "switch_to", "",
+                                            "controller of the scripted switch ('' = none)")
+        if self.switch_to:
+            check_controller(self.switch_to)
         p = self.params
         self.mode = p.sim.mode
         self.period = p.sim.control_period
@@ -116,19 +136,29 @@ class SimNode(Node):
         self.torque = np.zeros((N_LEGS, 2))
         self.obs = self.physics.observe()
         self.stamp = -1
+        self.prepared: tuple[int, int, list] = (0, 0, [])
         self.answered = False
+        self.advanced = False  # realtime: the current tick's command applied, next tick ready
         self.newest: np.ndarray | None = None  # realtime: newest command not yet applied
         self.started = False
         self.finished = False
         self.missed = self.late = self.on_time = self.foreign = self.resyncs = 0
         self.silent_ticks = 0
+        # Logging costs ~1 ms a call (rclpy inspects the caller): never per tick. Lockstep
+        # warns at the first timeout; realtime after 10 ms without any command.
+        self.warn_after = 1 if self.mode == "lockstep" else max(1, round(0.01 / self.period))
+        self.warned = False
         self.fallback = False
         self.fallback_episodes = 0
         self.switches = 0
+        self.switch_tick = -SWITCH_WINDOW
+        self.missed_after_switch = 0
         self.t0 = 0.0
         self.wall_start = 0.0
         self._rtf = (time.monotonic(), 0)
         self.rtf = 0.0
+        self.published_at = 0.0  # wall time (monotonic) the current tick went out
+        self.latency = np.zeros(LATENCY_BINS, dtype=np.int64)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -177,6 +207,27 @@ class SimNode(Node):
             missing.append(f"matching of {T.JOINT_COMMANDS}")
         return missing
 
+    def _check_controllers(self) -> None:
+        """Ask each expected controller its lifecycle state (and say if it is not active).
+
+        Also warms up the path from each controller's process to this one: the first message
+        between two processes maps shared memory and costs milliseconds, which in realtime
+        mode would fall on the first tick after a switch.
+        """
+        from lifecycle_msgs.srv import GetState
+
+        names = [n for n in self.wait_for if n.endswith("_controller")]
+        clients = [self.create_client(GetState, f"/{n}/get_state") for n in names]
+        self.loop.refresh()
+        futures = [c.call_async(GetState.Request()) for c in clients]
+        self.loop.spin(until=lambda: all(f.done() for f in futures), timeout=5.0)
+        for name, client, future in zip(names, clients, futures):
+            state = future.result().current_state.label if future.done() else "not answering"
+            if state != "active":
+                self.get_logger().warning(f"{name} is {state}: it answers only once active")
+            self.destroy_client(client)
+        self.loop.refresh()
+
     def start(self) -> None:
         """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
         self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
@@ -192,6 +243,7 @@ class SimNode(Node):
                     f"starting without: {'; '.join(self.graph_missing())} (not there after "
                     f"{self.startup_timeout:g} s: check that those nodes run on this "
                     f"ROS_DOMAIN_ID)")
+            self._check_controllers()
         self.get_logger().info(
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
@@ -199,31 +251,46 @@ class SimNode(Node):
         self.started = True
         self.wall_start = self.t0 = time.monotonic()
         self._rtf = (self.wall_start, 0)
-        self._publish_tick()
+        self._prepare()
+        self._send()
 
     # ------------------------------------------------------------------ ticks
-    def _publish_tick(self) -> None:
+    def _prepare(self) -> None:
+        """Sample the current tick and serialize its messages (not sent yet)."""
         k = self.physics.tick
         self.obs = obs = self.physics.observe()
-        self.stamp = stamp = T.stamp_ns(k * self.period)
-        self.answered = False
+        stamp = T.stamp_ns(k * self.period)
         cs = self.codecs
+        out = []
         # Foot forces first: the controller needs them with the joint states that wake it.
         for topic, frame in ((T.FOOT_FORCES, ""), (T.JOINT_STATES, self.in_charge),
                              (T.HIP_STATES, "")):
             c = T.state_columns(obs, topic)
-            self.pub[topic].publish(cs[topic].encode(stamp, frame, c.position, c.velocity,
-                                                     c.effort))
-        self.pub[T.CLOCK].publish(C.encode_clock(stamp))
+            out.append((self.pub[topic], cs[topic].encode(stamp, frame, c.position, c.velocity,
+                                                          c.effort)))
+        out.append((self.pub[T.CLOCK], C.encode_clock(stamp)))
+        self.prepared = (k, stamp, out)
+
+    def _send(self) -> None:
+        """Publish the prepared tick and arm the deadline of its command."""
+        k, stamp, out = self.prepared
+        for pub, data in out:
+            pub.publish(data)
+        self.stamp = stamp
+        self.answered = False
+        self.advanced = False
+        now = self.published_at = time.monotonic()
         if self.stop_at_end and k >= self.end_tick:
             self.finished = True
             self.loop.set_deadline(None)
             self.loop.stop()
-            return
-        now = time.monotonic()
-        if self.mode == "lockstep":
+        elif self.mode == "lockstep":
             wait = self.period if self.silent_ticks else self.params.sim.lockstep_timeout
             self.loop.set_deadline(now + wait, self._on_timeout)
+        elif k == 0:
+            # Realtime: tick 0 waits like lockstep (the first messages of every connection
+            # are slow); the wall-clock schedule starts when its command arrives.
+            self.loop.set_deadline(now + self.params.sim.lockstep_timeout, self._on_period_end)
         else:
             due = self.t0 + (k + 1) * self.period
             if now - due > RESYNC_TICKS * self.period:
@@ -233,6 +300,8 @@ class SimNode(Node):
             self.loop.set_deadline(due, self._on_period_end)
 
     def _on_command(self, data: bytes) -> None:
+        if self.finished:
+            return
         cmd = self.codecs[T.JOINT_COMMANDS].decode(data)
         if cmd.frame_id != self.in_charge:
             self.foreign += 1
@@ -240,42 +309,67 @@ class SimNode(Node):
         if cmd.stamp_ns != self.stamp or self.answered or not self.started:
             if cmd.stamp_ns < self.stamp:
                 self.late += 1
-                if self.mode == "realtime":
+                if self.mode == "realtime" and not self.advanced:
                     self.newest = cmd.effort.reshape(N_LEGS, 2).copy()
             return
         self.answered = True
+        if 0 <= self.physics.tick - self.switch_tick < 6:
+            self._dbg = getattr(self, "_dbg", []); self._dbg.append((self.physics.tick, round((time.monotonic() - self.published_at)*1e3, 3)))
+        lat = int((time.monotonic() - self.published_at) / LATENCY_BIN)
+        self.latency[min(lat, LATENCY_BINS - 1)] += 1
         demand = cmd.effort.reshape(N_LEGS, 2)
+        if self.silent_ticks:
+            self._controller_back()
         if self.mode == "lockstep":
-            self._advance(demand)
-        else:
-            self.on_time += 1
-            self.newest = demand.copy()
+            self._step(demand)
+            self._send()
+            return
+        # Realtime: integrate and serialize the next tick now, send it when its time comes.
+        self.on_time += 1
+        self.newest = None
+        self._step(demand)
+        self.advanced = True
+        if self.physics.tick == 1:  # the schedule starts: tick 1 goes out now
+            self.t0 = time.monotonic() - self.period
+            self.loop.set_deadline(0.0, self._on_period_end)
+
+    def _miss(self) -> None:
+        self.missed += 1
+        if self.physics.tick - self.switch_tick < SWITCH_WINDOW:
+            self.missed_after_switch += 1
 
     def _on_timeout(self) -> None:
         """Lockstep: no command for the current tick in time."""
-        self.missed += 1
+        self._miss()
         self._count_silent()
-        self._advance(None)
+        self._step(None)
+        self._send()
 
     def _on_period_end(self) -> None:
-        """Realtime: the period of the current tick is over; apply the newest command."""
-        if not self.answered:
-            self.missed += 1
-        demand, self.newest = self.newest, None
-        if demand is None:
-            self._count_silent()
-        elif self.silent_ticks:
-            self._controller_back()
-        self._advance(demand, realtime=True)
+        """Realtime: the period of the current tick is over; send the next tick, having
+        applied the newest command (held torque or fallback if there is none)."""
+        if not self.advanced:
+            if self.physics.tick == 0:
+                self.t0 = time.monotonic() - self.period
+            self._miss()
+            demand, self.newest = self.newest, None
+            if demand is None:
+                self._count_silent()
+            elif self.silent_ticks:
+                self._controller_back()
+            self._step(demand)
+        self._send()
 
     def _count_silent(self) -> None:
         """One more period without any command: hold, then fall back after sim.hold_time."""
         self.silent_ticks += 1
         k = self.physics.tick
-        if self.silent_ticks == 1:
+        if self.silent_ticks == self.warn_after:
+            self.warned = True
             self.get_logger().warning(
-                f"no command from {self.in_charge} for tick {k} (t = {k * self.period:.3f} s): "
-                f"holding the last torque")
+                f"no command from {self.in_charge} since tick {k - self.silent_ticks + 1} "
+                f"(t = {(k - self.silent_ticks + 1) * self.period:.3f} s): holding the last "
+                f"torque")
         hold = self.params.sim.hold_time
         if not self.fallback and self.silent_ticks * self.period >= hold - 1e-12:
             self.fallback = True
@@ -286,25 +380,31 @@ class SimNode(Node):
                 f"from tick {k}")
 
     def _controller_back(self) -> None:
-        k = self.physics.tick
-        self.get_logger().info(
-            f"{self.in_charge} answers again at tick {k} after {self.silent_ticks} missed ticks"
-            + ("; leaving the damping fallback" if self.fallback else ""))
+        if self.warned:
+            self.get_logger().info(
+                f"{self.in_charge} answers again at tick {self.physics.tick} after "
+                f"{self.silent_ticks} silent ticks"
+                + ("; leaving the damping fallback" if self.fallback else ""))
         self.silent_ticks = 0
+        self.warned = False
         self.fallback = False
 
-    def _advance(self, demand: np.ndarray | None, realtime: bool = False) -> None:
-        """Apply a command (or hold / fall back), integrate one period, publish the next tick."""
+    def _step(self, demand: np.ndarray | None) -> None:
+        """Apply a command (None: hold the torque, or damp in fallback), integrate one period,
+        apply what changes at the tick boundary, prepare the next tick's messages."""
         P = self.physics.P
         if demand is not None:
-            if self.silent_ticks and not realtime:
-                self._controller_back()
             saturate(demand, P[P_TMAX], self.torque)
         elif self.fallback:
             damping = -self.params.sim.fallback_damping * self.obs[O_THV]
             saturate(damping, P[P_TMAX], self.torque)
         # else: hold self.torque, the torque applied over the last period
         self.physics.advance_tick(self.torque)
+        if self.switch_to and self.physics.tick * self.period >= self.switch_at - 1e-12:
+            to, self.switch_to = self.switch_to, ""
+            result = self.set_parameters([Parameter("run.controller", value=to)])[0]
+            if not result.successful:
+                self.get_logger().error(f"scripted switch to {to!r} refused: {result.reason}")
         if self.pending_params is not None:
             self.physics.set_params(self.pending_params)
             self.pending_params = None
@@ -312,12 +412,14 @@ class SimNode(Node):
             old, self.in_charge = self.in_charge, self.pending_controller
             self.pending_controller = None
             self.switches += 1
+            self.switch_tick = self.physics.tick
             self.silent_ticks = 0
+            self.warned = self.fallback = False
             k = self.physics.tick
             self.get_logger().info(f"switched {old} -> {self.in_charge} at tick {k} "
                                    f"(t = {k * self.period:.3f} s)")
             self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
-        self._publish_tick()
+        self._prepare()
 
     # ------------------------------------------------------------------ status
     def status(self) -> C.Status:
@@ -344,7 +446,8 @@ class SimNode(Node):
             "late_ticks": str(self.late), "on_time_ticks": str(self.on_time),
             "fallback": "on" if self.fallback else "off",
             "fallback_episodes": str(self.fallback_episodes),
-            "switches": str(self.switches), "real_time_factor": f"{self.rtf:.3f}",
+            "switches": str(self.switches), "missed_after_switch": str(self.missed_after_switch),
+            "real_time_factor": f"{self.rtf:.3f}",
             "resyncs": str(self.resyncs), "end_tick": str(self.end_tick),
             "stop_at_end": str(self.stop_at_end).lower(),
         }
@@ -355,6 +458,14 @@ class SimNode(Node):
                                                   [self.status()])
         self.pub[T.STATUS].publish(msg)
 
+    def latency_ms(self, q: float) -> float:
+        """Quantile ``q`` of the state -> command round trip (ms, from the histogram)."""
+        n = int(self.latency.sum())
+        if n == 0:
+            return float("nan")
+        i = int(np.searchsorted(np.cumsum(self.latency), q * n))
+        return (i + 1) * LATENCY_BIN * 1e3
+
     def summary(self) -> str:
         """One line: what ran, how many ticks were missed or late."""
         k = self.physics.tick
@@ -362,8 +473,10 @@ class SimNode(Node):
         rtf = k * self.period / wall if wall > 0 else 0.0
         return (f"stopped at tick {k} (t = {k * self.period:.3f} s) in {self.mode} mode: "
                 f"{self.missed} missed, {self.late} late, {self.on_time} on time (realtime), "
-                f"{self.fallback_episodes} fallback episodes, {self.switches} switches, "
-                f"{self.resyncs} resyncs; wall {wall:.2f} s, real-time factor {rtf:.3f}")
+                f"{self.fallback_episodes} fallback episodes, {self.switches} switches "
+                f"({self.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
+                f"{self.resyncs} resyncs; round trip median {self.latency_ms(0.5):.2f} ms, p99 "
+                f"{self.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}")
 
     def flush(self, timeout: float = 2.0) -> None:
         """Wait (at most ``timeout`` s in all) until subscribers acknowledged every message."""
@@ -375,6 +488,7 @@ class SimNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``hexapod_sim``."""
+    configure_middleware()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0
@@ -398,7 +512,7 @@ def main(args: list[str] | None = None) -> int:
     finally:
         if node is not None:
             if node.started:
-                node.get_logger().info(node.summary())
+                node.get_logger().info(node.summary() + str(getattr(node, "_dbg", None)))
                 node._publish_status()
             node.flush()
             node.loop.destroy()

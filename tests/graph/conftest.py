@@ -1,0 +1,99 @@
+"""Fixtures of the node-graph tests: real node processes, one ROS_DOMAIN_ID per graph.
+
+Every graph gets its own domain id (1..101, from the pid and a counter), localhost-only
+discovery, and its processes are always stopped at teardown (SIGINT, SIGTERM, SIGKILL).
+Tests wait on conditions (log lines, process exits, files), never on fixed sleeps.
+"""
+from __future__ import annotations
+
+import contextlib
+import itertools
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import pytest
+
+from hexapod_metrics.cmd_graph import GraphProcesses
+
+rclpy = pytest.importorskip("rclpy", reason="the graph tests need rclpy (scripts/setup.sh)")
+
+_counter = itertools.count()
+#: Everything but the recorder stops first, so that the recorder gets their last messages.
+STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
+              "metrics")
+
+
+def next_domain_id() -> int:
+    """A ROS_DOMAIN_ID in 1..101 unlikely to be used by a concurrent test session."""
+    return (os.getpid() * 13 + next(_counter) * 7) % 101 + 1
+
+
+@pytest.fixture
+def make_graph(tmp_path: Path) -> Iterator[Callable[..., GraphProcesses]]:
+    """``make_graph(name)`` -> a GraphProcesses on a fresh domain id; all stopped at teardown."""
+    graphs: list[GraphProcesses] = []
+
+    def make(name: str = "g", **kw: Any) -> GraphProcesses:
+        domain = next_domain_id()
+        g = GraphProcesses(tmp_path / f"{name}_logs",
+                           env={"ROS_DOMAIN_ID": str(domain),
+                                "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, **kw)
+        g.domain_id = domain  # type: ignore[attr-defined]
+        graphs.append(g)
+        return g
+
+    yield make
+    for g in graphs:
+        g.stop_all(order=STOP_ORDER)
+
+
+def sim_summary(log: str) -> dict[str, float]:
+    """Figures of the sim's final summary line."""
+    m = re.search(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time.*?"
+                  r"(\d+) switches \((\d+) missed within", log)
+    assert m, f"no summary line in the sim's log:\n{log[-2000:]}"
+    keys = ("tick", "missed", "late", "on_time", "switches", "missed_after_switch")
+    return dict(zip(keys, (int(x) for x in m.groups())))
+
+
+def hexapod_cli(domain_id: int, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run the ``hexapod`` CLI on a domain id."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    return subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@contextlib.contextmanager
+def ros_client(domain_id: int) -> Iterator[Any]:
+    """An rclpy node on ``domain_id`` in this process (own context), destroyed afterwards."""
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain_id)
+    node = rclpy.create_node(f"graph_test_{os.getpid()}", context=ctx,
+                             start_parameter_services=False)
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def call(node: Any, srv_type: Any, name: str, request: Any, timeout: float = 30) -> Any:
+    """Call a service from ``node`` (own executor) and return the response."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    client = node.create_client(srv_type, name)
+    assert client.wait_for_service(timeout_sec=timeout), f"{name} not available"
+    future = client.call_async(request)
+    ex = SingleThreadedExecutor(context=node.context)
+    ex.add_node(node)
+    ex.spin_until_future_complete(future, timeout_sec=timeout)
+    ex.remove_node(node)
+    assert future.done(), f"{name} did not answer"
+    return future.result()

@@ -1,0 +1,79 @@
+"""A lockstep graph run records exactly what the in-process closed loop computes."""
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from hexapod_control.core.closed_loop import run
+from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_metrics.core.simulate import simulate
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.params import load_params
+
+from .conftest import sim_summary
+
+DURATION = 3.0
+NODES = "trajectory_generator,pd_pf_controller,metrics"
+
+
+def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make_graph,
+                                                                             tmp_path):
+    bag = tmp_path / "bag"
+    g = make_graph()
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
+            f"wait_for:={NODES}")
+    assert g.wait_exit("hexapod_sim", 300) == 0, g.log("hexapod_sim")
+    summary = sim_summary(g.log("hexapod_sim"))
+    g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+    assert summary["missed"] == 0 and summary["late"] == 0
+
+    p = load_params()
+    ref = run(p, "pd_pf", DURATION)
+    n = ref.obs.shape[0]  # ticks 0..N
+    with open_bag(bag) as b:
+        assert not b.truncated
+        cols = {}
+        for topic in T.STATE_TOPICS:
+            a = read_joint_state_arrays(b, topic)
+            stamps = np.arange(n) * 1_000_000
+            assert np.array_equal(a.stamps, stamps), f"{topic}: a tick is missing"
+            cols[topic] = (a.position, a.velocity, a.effort)
+        obs = T.obs_from_columns(cols)
+        np.testing.assert_allclose(obs, ref.obs, rtol=0, atol=1e-9)
+        cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
+        assert np.array_equal(cmd.stamps[:n - 1], np.arange(n - 1) * 1_000_000)
+        np.testing.assert_allclose(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command,
+                                   rtol=0, atol=1e-9)
+
+    # The independent reader: every topic with the expected type and count.
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([Path(bag)]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        msgs = [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()]
+    counts = Counter(t for t, _ in msgs)
+    assert types[T.JOINT_STATES] == "sensor_msgs/msg/JointState"
+    assert types[T.CLOCK] == "rosgraph_msgs/msg/Clock"
+    assert types[T.ACTIVE_CONTROLLER] == "std_msgs/msg/String"
+    assert types[T.INDICES] == types[T.STATUS] == "diagnostic_msgs/msg/DiagnosticArray"
+    for topic in (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.CLOCK):
+        assert counts[topic] == n
+    assert counts[T.JOINT_COMMANDS] >= n - 1 and counts[T.REFERENCE] >= n
+    assert counts[T.INDICES] == 3
+    assert [m.data for t, m in msgs if t == T.ACTIVE_CONTROLLER] == ["pd_pf"]
+
+    # Online indices of the last cycle equal the in-process evaluation.
+    last = [m for t, m in msgs if t == T.INDICES][-1].status[0]
+    values = {kv.key: kv.value for kv in last.values}
+    expected = simulate(p, "pd_pf", DURATION).indices
+    assert values["controller"] == "pd_pf" and values["cycle"] == "2"
+    for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF"):
+        assert float(values[name]) == getattr(expected, name)
+    report = json.loads((bag / "indices.json").read_text())
+    assert report["segments"][0]["last_full_cycle"]["indices"]["eps_xH"] == expected.eps_xH
