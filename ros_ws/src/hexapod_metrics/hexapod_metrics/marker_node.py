@@ -18,7 +18,6 @@ from builtin_interfaces.msg import Duration as DurationMsg
 from geometry_msgs.msg import Point
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
@@ -100,9 +99,8 @@ class MarkerNode(Node):
         self.stride = max(1, int(round(1.0 / (rate * p.sim.control_period))))
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.loop = HotLoop(self)
-        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
-        self.pub = self.create_publisher(MarkerArray, T.MARKERS, qos)
+        self.pub = self.create_publisher(MarkerArray, T.MARKERS,
+                                         C.TOPIC_QOS[T.MARKERS].publisher())
         for topic in STATE:
             self.loop.subscribe(JointState, topic, self._make_cb(topic),
                                 C.TOPIC_QOS[topic].subscriber(C.CONTROL_DEPTH))

@@ -28,6 +28,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from visualization_msgs.msg import MarkerArray
 
 from .core import topics as T
 
@@ -92,6 +93,7 @@ TOPIC_QOS: dict[str, TopicQos] = {
     T.ACTIVE_CONTROLLER: TopicQos(String, transient=True, depth=1),
     T.INDICES: TopicQos(DiagnosticArray, depth=100),
     T.STATUS: TopicQos(DiagnosticArray, depth=10),
+    T.MARKERS: TopicQos(MarkerArray, depth=100),
 }
 
 # --------------------------------------------------------------------------- stamps

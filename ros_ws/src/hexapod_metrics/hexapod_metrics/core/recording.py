@@ -32,6 +32,7 @@ TOPICS: dict[str, tuple[str, str]] = {
     T.ACTIVE_CONTROLLER: ("std_msgs/msg/String", "transient_local"),
     T.INDICES: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
     T.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
+    T.MARKERS: ("visualization_msgs/msg/MarkerArray", "reliable"),
 }
 
 
@@ -77,7 +78,7 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     ticks_per_cycle = int(round(p.cycle_time / p.sim.control_period))
     with BagWriter(path, custom_data=bag_custom_data(p, "hexapod simulate")) as bag:
         for name, (msgtype, qos) in TOPICS.items():
-            if name != T.STATUS:
+            if name not in (T.STATUS, T.MARKERS):  # published by nodes only
                 bag.add_topic(name, msgtype, qos)
         switch_ticks = dict(run.switches)
         last = n_ticks if run.diverged_at is None else int(round(
