@@ -47,7 +47,7 @@ while [[ $# -gt 0 ]]; do
     --bag) need "$@"; bag="$2"; shift 2 ;;
     --sim-time) sim_time=1; shift ;;
     --markers) markers=1; shift ;;
-    -h|--help) sed -n '2,30p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,27p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (try --help)" ;;
   esac
 done
