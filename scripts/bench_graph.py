@@ -10,7 +10,10 @@ S5: realtime mode, 1 kHz, all five nodes: percentage of ticks whose command arri
 Each run starts a fresh graph on its own ROS_DOMAIN_ID and prints the CPU seconds every
 node used, so a slow figure says where the time went.
 
-Usage: scripts/bench_graph.py [--runs 3] [--duration 10] [--only s4|s5]
+With --rt the sim, the controllers and the trajectory generator run with real-time
+scheduling (``chrt -f 10``, needs the privilege): an option of scripts/run_graph.sh too.
+
+Usage: scripts/bench_graph.py [--runs 3] [--duration 10] [--only s4|s5] [--rt]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
@@ -42,17 +45,22 @@ NODES = ("metrics", "trajectory_generator", "pd_p_controller", "pd_pf_controller
 CPU_COLUMNS = ("hexapod_sim",) + NODES
 
 
-def run_graph(mode: str, duration: float, domain: int, log_dir: Path) -> dict[str, float]:
+RT_PREFIX = ("chrt", "-f", "10")
+
+
+def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool = False
+              ) -> dict[str, float]:
     """One graph run; the sim's summary figures and each node's CPU seconds."""
     from hexapod_metrics.cmd_graph import GraphProcesses
 
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)})
+    prefix = RT_PREFIX if rt else ()
     try:
         g.start("metrics", f"bag_path:={log_dir / 'bag'}")
         for name in NODES[1:]:
-            g.start(name)
+            g.start(name, prefix=prefix)
         g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
-                f"sim.mode:={mode}")
+                f"sim.mode:={mode}", prefix=prefix)
         g.wait_log("hexapod_sim", "real-time factor", timeout=duration * 20 + 120)
         cpu = {n: g.cpu_seconds(n) for n in NODES}
         try:
@@ -81,8 +89,14 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--only", choices=("s4", "s5"))
+    ap.add_argument("--rt", action="store_true",
+                    help="real-time scheduling (chrt -f 10) for all nodes but the recorder")
     args = ap.parse_args()
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}")
+    if args.rt and subprocess.run([*RT_PREFIX, "true"], capture_output=True).returncode:
+        ap.error("--rt: chrt -f 10 is not permitted here (needs CAP_SYS_NICE)")
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
+          + (", real-time scheduling (chrt -f 10) for sim, controllers, trajectory" if args.rt
+             else ", default scheduling (recorder at nice 10)"))
     base = 150 + os.getpid() % 80
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         for key, mode in (("s4", "lockstep"), ("s5", "realtime")):
@@ -91,13 +105,14 @@ def main() -> int:
             rows = []
             for i in range(args.runs):
                 r = run_graph(mode, args.duration, (base + 2 * i + (key == "s5")) % 101 + 1,
-                              Path(tmp) / f"{key}_{i}")
+                              Path(tmp) / f"{key}_{i}", args.rt)
                 rows.append(r)
                 cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
                 print(f"{key} run {i + 1}: {r['ticks']} ticks, wall {r['wall']:.2f} s, "
                       f"real-time factor {r['rtf']:.3f}, missed {r['missed']}, late "
                       f"{r['late']}, on time {r['on_time']}, round trip median "
-                      f"{r['rt_median']:.2f} ms p99 {r['rt_p99']:.2f} ms; CPU s: {cpu}", flush=True)
+                      f"{r['rt_median']:.2f} ms p99 {r['rt_p99']:.2f} ms; CPU s: {cpu}",
+                      flush=True)
             if key == "s4":
                 med = statistics.median(r["rtf"] for r in rows)
                 print(f"S4 lockstep real-time factor (1 kHz, recording on), median of "

@@ -28,14 +28,13 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleState, Node as LifecycleNode, TransitionCallbackReturn
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
@@ -50,6 +49,7 @@ class ControllerNode(LifecycleNode):
         self.arch = architecture
         self.code = controller_code(architecture)
         super().__init__(f"{architecture}_controller")
+        self.log = FastLogger(self.get_logger().name)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.autostart = declare_node_param(self, "autostart", True,
                                             "configure and activate at start")
@@ -69,6 +69,7 @@ class ControllerNode(LifecycleNode):
         self.theta_vel_d = np.zeros((N_LEGS, 2))
         self.demand = np.zeros((N_LEGS, 2))
         self.answered = 0
+        self.waited = 0  # states whose reference or foot forces came after them
         self._load_gains(self.binding.params)
         self._law()  # warm up the compiled law before the first tick
 
@@ -93,7 +94,7 @@ class ControllerNode(LifecycleNode):
         self.subs[T.FOOT_FORCES] = self.loop.subscribe(
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
-        self.get_logger().info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
+        self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
                                f"{tuple(float(g) for g in self.gains)}")
         return TransitionCallbackReturn.SUCCESS
 
@@ -105,7 +106,7 @@ class ControllerNode(LifecycleNode):
                 JointState, T.JOINT_STATES, self._on_state,
                 C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
         self.active = True
-        self.get_logger().info("active: answering the states that name "
+        self.log.info("active: answering the states that name "
                                f"'{self.arch}' as the controller in charge")
         return ret
 
@@ -113,7 +114,7 @@ class ControllerNode(LifecycleNode):
         """Stop answering (the subscriptions stay, buffers keep filling)."""
         self.active = False
         self.pending = None
-        self.get_logger().info("inactive")
+        self.log.info("inactive")
         return super().on_deactivate(state)
 
     def _teardown(self) -> None:
@@ -176,13 +177,17 @@ class ControllerNode(LifecycleNode):
         self.pending = stamp
         self._answer()
         if self.pending is not None:  # an input is late: let it wake us
+            self.waited += 1
             self.loop.set_wake(self.subs[T.REFERENCE], True)
             self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
 
     def _answer(self) -> None:
+        """Compute and publish the command of the pending state once its inputs are there."""
         stamp = self.pending
-        ref = self.refs.get(stamp)  # type: ignore[arg-type]
-        ff = self.forces.get(stamp)  # type: ignore[arg-type]
+        if stamp is None:
+            return
+        ref = self.refs.get(stamp)
+        ff = self.forces.get(stamp)
         if ref is None or ff is None:
             return
         self.pending = None
@@ -194,8 +199,8 @@ class ControllerNode(LifecycleNode):
         self.theta_vel_d[:] = r["theta_vel"]
         self._law()
         c = T.command_columns(self.demand)
-        self.pub.publish(self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity,  # type: ignore[arg-type]
-                                               c.effort))
+        data = self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity, c.effort)
+        self.pub.publish(data)
         self.answered += 1
 
     def _law(self) -> None:
@@ -204,8 +209,8 @@ class ControllerNode(LifecycleNode):
 
 
 def _main(architecture: str, args: list[str] | None) -> int:
-    configure_middleware()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    if not init_rclpy(args, f"{architecture}_controller"):
+        return 2
     node = None
     code = 0
     try:
@@ -222,7 +227,8 @@ def _main(architecture: str, args: list[str] | None) -> int:
         pass
     finally:
         if node is not None:
-            node.get_logger().info(f"stopping after {node.answered} commands")
+            node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
+                          f"their reference or foot forces)")
             if node.pub is not None:
                 node.pub.wait_for_all_acked(Duration(seconds=1))
             node.loop.destroy()

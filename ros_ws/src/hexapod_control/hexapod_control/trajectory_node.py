@@ -20,7 +20,6 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -28,7 +27,7 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
@@ -39,6 +38,7 @@ class TrajectoryNode(Node):
 
     def __init__(self) -> None:
         super().__init__("trajectory_generator")
+        self.log = FastLogger(self.get_logger().name)
         self.binding = ParamBinding(self, declare_params(self))
         self.lookahead = declare_node_param(self, "lookahead", 1,
                                             "ticks published ahead of the clock")
@@ -75,7 +75,7 @@ class TrajectoryNode(Node):
     def _on_clock(self, data: bytes) -> None:
         k = C.tick_of(C.decode_stamp(data), self.period_ns)
         if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
-            self.get_logger().info(f"clock went back to tick {k}: restarting the references")
+            self.log.info(f"clock went back to tick {k}: restarting the references")
             self.next_tick = k
         for j in range(max(k, self.next_tick), k + self.lookahead + 1):
             c = self._reference_of(j)
@@ -89,8 +89,8 @@ class TrajectoryNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``trajectory_generator``."""
-    configure_middleware()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    if not init_rclpy(args, "trajectory_generator"):
+        return 2
     node = None
     code = 0
     try:

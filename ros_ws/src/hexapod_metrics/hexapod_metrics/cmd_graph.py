@@ -75,13 +75,14 @@ class GraphProcesses:
         self._logs: dict[str, IO[bytes]] = {}
 
     def start(self, name: str, *overrides: str, node: str | None = None,
-              nice: int | None = None) -> subprocess.Popen[bytes]:
+              nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
         """Start node ``node`` (default ``name``) as process ``name`` with ``-p`` overrides
-        (``"stop_at_end:=true"``); ``nice`` defaults to :data:`NICE` of the node."""
+        (``"stop_at_end:=true"``); ``nice`` defaults to :data:`NICE` of the node; ``prefix``
+        is a command to run it under (e.g. ``("chrt", "-f", "10")``)."""
         node = node or name
         module, func = NODES[node]
         nice = NICE.get(node, 0) if nice is None else nice
-        args = ["nice", "-n", str(nice)] if nice else []
+        args = list(prefix) + (["nice", "-n", str(nice)] if nice else [])
         args += [sys.executable, "-c",
                 f"import sys; from {module} import {func}; sys.exit({func}())", "--ros-args"]
         if self.params:
@@ -242,7 +243,8 @@ def switch(controller: str, timeout: float = 10.0) -> str:
         if not result.successful:
             raise GraphError(f"hexapod_sim refused run.controller = {controller}: "
                              f"{result.reason}")
-        activated = "" if before == "active" else f"; {controller}_controller was {before}, now active"
+        activated = ("" if before == "active"
+                     else f"; {controller}_controller was {before}, now active")
         if current == controller:
             return f"{controller} already in charge{activated}"
         return f"switching {current} -> {controller} at the next tick{activated}"

@@ -35,12 +35,11 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.hot_loop import HotLoop, configure_middleware, install_stop_signals
+from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
@@ -151,6 +150,7 @@ class MetricsNode(Node):
 
     def __init__(self) -> None:
         super().__init__("metrics")
+        self.log = FastLogger(self.get_logger().name)
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
@@ -174,7 +174,7 @@ class MetricsNode(Node):
                 continue
             self._subscribe(topic)
         self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
-        self.get_logger().info(f"recording to {self.bag_path}")
+        self.log.info(f"recording to {self.bag_path}")
 
     def _subscribe(self, topic: str) -> None:
         q = C.TOPIC_QOS[topic]
@@ -194,7 +194,7 @@ class MetricsNode(Node):
             def cb(data: bytes, topic: str = topic) -> None:
                 self.writer.write(topic, self.clock_ns, data)
                 self.counts[topic] += 1
-                self.get_logger().info(f"controller in charge: {C.decode_string(data)} "
+                self.log.info(f"controller in charge: {C.decode_string(data)} "
                                        f"(sim time {self.clock_ns * 1e-9:.3f} s)")
         else:  # stamped: joint_commands, status
             def cb(data: bytes, topic: str = topic) -> None:
@@ -212,7 +212,7 @@ class MetricsNode(Node):
         self.pub_indices.publish(data)
         self.writer.write(T.INDICES, stamp, data)
         self.counts[T.INDICES] += 1
-        self.get_logger().info(
+        self.log.info(
             f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
             f"({cycle['controller']}): "
             + ", ".join(f"{n} {cycle['indices'][n]:.4g}" for n in INDEX_NAMES))
@@ -227,15 +227,15 @@ class MetricsNode(Node):
             self.writer.close()
         report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report()}
         (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
-        self.get_logger().info(
+        self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
             f"{len(self.scorer.cycles)} cycles scored)")
 
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``metrics``."""
-    configure_middleware()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    if not init_rclpy(args, "metrics"):
+        return 2
     node = None
     code = 0
     try:

@@ -146,8 +146,8 @@ def string(text: str) -> String:
     return String(data=text)
 
 
-LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN,
-          "error": DiagnosticStatus.ERROR, "stale": DiagnosticStatus.STALE}
+#: diagnostic_msgs/DiagnosticStatus levels (a ``byte`` field: bytes of length 1 in rclpy).
+LEVELS = {"ok": 0, "warn": 1, "error": 2, "stale": 3}
 
 
 class Status(NamedTuple):
@@ -165,7 +165,7 @@ def diagnostic_array(stamp_ns: int, statuses: Sequence[Status]) -> DiagnosticArr
     msg = DiagnosticArray()
     msg.header.stamp = to_time(stamp_ns)
     for s in statuses:
-        st = DiagnosticStatus(level=LEVELS[s.level], name=s.name, message=s.message,
+        st = DiagnosticStatus(level=bytes((LEVELS[s.level],)), name=s.name, message=s.message,
                               hardware_id=s.hardware_id)
         st.values = [KeyValue(key=str(k), value=str(v)) for k, v in s.values.items()]
         msg.status.append(st)

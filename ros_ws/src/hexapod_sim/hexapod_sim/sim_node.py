@@ -57,7 +57,6 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -68,7 +67,7 @@ from .core.engine import Physics
 from .core.errors import DivergenceError, HexapodError, ParameterError
 from .core.layout import O_THV, P_TMAX
 from .core.params import N_LEGS, HexapodParams, check_controller
-from .hot_loop import HotLoop, configure_middleware, install_stop_signals
+from .hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from .ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
@@ -92,6 +91,7 @@ class SimNode(Node):
 
     def __init__(self) -> None:
         super().__init__("hexapod_sim")
+        self.log = FastLogger(self.get_logger().name)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.stop_at_end = declare_node_param(
             self, "stop_at_end", False, "stop (and exit) after the tick at run.duration")
@@ -177,7 +177,7 @@ class SimNode(Node):
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
         if "run.controller" in names and p.run.controller != self.in_charge:
             self.pending_controller = p.run.controller
-            self.get_logger().info(f"switch to {p.run.controller} requested: takes effect at "
+            self.log.info(f"switch to {p.run.controller} requested: takes effect at "
                                    f"the next tick boundary")
         if any(n.startswith(("ground.", "actuator.")) for n in names):
             self.pending_params = p
@@ -224,7 +224,7 @@ class SimNode(Node):
         for name, client, future in zip(names, clients, futures):
             state = future.result().current_state.label if future.done() else "not answering"
             if state != "active":
-                self.get_logger().warning(f"{name} is {state}: it answers only once active")
+                self.log.warning(f"{name} is {state}: it answers only once active")
             self.destroy_client(client)
         self.loop.refresh()
 
@@ -232,19 +232,19 @@ class SimNode(Node):
         """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
         self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
         if self.wait_for:
-            self.get_logger().info(f"waiting for {', '.join(self.wait_for)} "
+            self.log.info(f"waiting for {', '.join(self.wait_for)} "
                                    f"(at most {self.startup_timeout:g} s)")
             ready = self.loop.spin(until=lambda: not self.graph_missing(),
                                    timeout=self.startup_timeout)
             if self.loop.stopped:
                 return
             if not ready:
-                self.get_logger().error(
+                self.log.error(
                     f"starting without: {'; '.join(self.graph_missing())} (not there after "
                     f"{self.startup_timeout:g} s: check that those nodes run on this "
                     f"ROS_DOMAIN_ID)")
             self._check_controllers()
-        self.get_logger().info(
+        self.log.info(
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
             + (" (stops there)" if self.stop_at_end else " (runs until stopped)"))
@@ -313,8 +313,6 @@ class SimNode(Node):
                     self.newest = cmd.effort.reshape(N_LEGS, 2).copy()
             return
         self.answered = True
-        if 0 <= self.physics.tick - self.switch_tick < 6:
-            self._dbg = getattr(self, "_dbg", []); self._dbg.append((self.physics.tick, round((time.monotonic() - self.published_at)*1e3, 3)))
         lat = int((time.monotonic() - self.published_at) / LATENCY_BIN)
         self.latency[min(lat, LATENCY_BINS - 1)] += 1
         demand = cmd.effort.reshape(N_LEGS, 2)
@@ -366,7 +364,7 @@ class SimNode(Node):
         k = self.physics.tick
         if self.silent_ticks == self.warn_after:
             self.warned = True
-            self.get_logger().warning(
+            self.log.warning(
                 f"no command from {self.in_charge} since tick {k - self.silent_ticks + 1} "
                 f"(t = {(k - self.silent_ticks + 1) * self.period:.3f} s): holding the last "
                 f"torque")
@@ -374,14 +372,14 @@ class SimNode(Node):
         if not self.fallback and self.silent_ticks * self.period >= hold - 1e-12:
             self.fallback = True
             self.fallback_episodes += 1
-            self.get_logger().error(
+            self.log.error(
                 f"{self.in_charge} silent for {self.silent_ticks} ticks ({hold:g} s): falling "
                 f"back to joint damping ({self.params.sim.fallback_damping:g} N m s/rad) "
                 f"from tick {k}")
 
     def _controller_back(self) -> None:
         if self.warned:
-            self.get_logger().info(
+            self.log.info(
                 f"{self.in_charge} answers again at tick {self.physics.tick} after "
                 f"{self.silent_ticks} silent ticks"
                 + ("; leaving the damping fallback" if self.fallback else ""))
@@ -404,7 +402,7 @@ class SimNode(Node):
             to, self.switch_to = self.switch_to, ""
             result = self.set_parameters([Parameter("run.controller", value=to)])[0]
             if not result.successful:
-                self.get_logger().error(f"scripted switch to {to!r} refused: {result.reason}")
+                self.log.error(f"scripted switch to {to!r} refused: {result.reason}")
         if self.pending_params is not None:
             self.physics.set_params(self.pending_params)
             self.pending_params = None
@@ -416,7 +414,7 @@ class SimNode(Node):
             self.silent_ticks = 0
             self.warned = self.fallback = False
             k = self.physics.tick
-            self.get_logger().info(f"switched {old} -> {self.in_charge} at tick {k} "
+            self.log.info(f"switched {old} -> {self.in_charge} at tick {k} "
                                    f"(t = {k * self.period:.3f} s)")
             self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
         self._prepare()
@@ -488,8 +486,8 @@ class SimNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``hexapod_sim``."""
-    configure_middleware()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    if not init_rclpy(args, "hexapod_sim"):
+        return 2
     node = None
     code = 0
     try:
@@ -502,7 +500,7 @@ def main(args: list[str] | None = None) -> int:
         code = 2
     except DivergenceError as err:
         if node is not None:
-            node.get_logger().error(f"{err}: stopping")
+            node.log.error(f"{err}: stopping")
         code = 1
     except HexapodError as err:
         rclpy.logging.get_logger("hexapod_sim").error(str(err))
@@ -512,7 +510,7 @@ def main(args: list[str] | None = None) -> int:
     finally:
         if node is not None:
             if node.started:
-                node.get_logger().info(node.summary() + str(getattr(node, "_dbg", None)))
+                node.log.info(node.summary())
                 node._publish_status()
             node.flush()
             node.loop.destroy()

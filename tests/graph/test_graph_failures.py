@@ -1,0 +1,164 @@
+"""Controller crash and replacement, bad parameters, isolation of graphs by domain id."""
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from hexapod_control.core.closed_loop import run
+from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.params import default_params_path, load_params
+
+from .conftest import call, hexapod_cli, ros_client, sim_summary
+
+
+def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_graph):
+    g = make_graph()
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller",
+            "sim.lockstep_timeout:=0.2")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    assert g.kill("pd_pf_controller", signal.SIGKILL) == -signal.SIGKILL
+    g.wait_log("hexapod_sim", "falling back to joint damping", timeout=60)
+    assert g.procs["hexapod_sim"].poll() is None
+
+    status = hexapod_cli(g.domain_id, "status", "--json")
+    assert status.returncode == 0, status.stderr
+    import json
+
+    st = json.loads(status.stdout)["status"]
+    assert st["fallback"] == "on" and int(st["missed_ticks"]) > 0
+    assert st["level"] == "error" and "fallback" in st["message"]
+
+    g.start("pd_pf_controller")  # a new process takes over
+    g.wait_log("hexapod_sim", "leaving the damping fallback", timeout=120)
+    assert g.stop("hexapod_sim") == 0
+    summary = sim_summary(g.log("hexapod_sim"))
+    assert summary["missed"] > 0
+    assert "1 fallback episodes" in g.log("hexapod_sim")
+
+
+def _bad_params_file(tmp_path: Path, name: str, value: object) -> Path:
+    doc = yaml.safe_load(default_params_path().read_text())
+    group, key = name.split(".")
+    doc["/**"]["ros__parameters"][group][key] = value
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+@pytest.mark.parametrize("node, name, value, message", [
+    ("hexapod_sim", "ground.k_y", -1,
+     "parameter 'ground.k_y' = -1.0 is invalid: allowed float in [0, 1e+12]"),
+    ("hexapod_sim", "gait.duty_factor", 1.5,
+     "parameter 'gait.duty_factor' = 1.5 is invalid: allowed float in (0, 1)"),
+    ("pd_pf_controller", "actuator.t_max", 0.0,
+     "parameter 'actuator.t_max' = 0.0 is invalid: allowed float in (0, inf]"),
+    ("trajectory_generator", "gait.body_height", 2.5, "parameter 'gait.body_height' = 2.5"),
+    ("metrics", "run.controller", "pd_x", "parameter 'run.controller' = 'pd_x' is invalid: "
+     "allowed one of pd_p, pd_pf"),
+])
+def test_bad_parameter_at_start_is_one_line_and_exit_2(make_graph, tmp_path, node, name, value,
+                                                        message):
+    g = make_graph(params=str(_bad_params_file(tmp_path, name, value)))
+    g.start(node, f"bag_path:={tmp_path / 'bag'}" if node == "metrics" else "wait_for:=''")
+    assert g.wait_exit(node, 120) == 2
+    log = g.log(node)
+    assert message in log and "Traceback" not in log
+    assert len([line for line in log.splitlines() if "ERROR" in line]) == 1
+
+
+def test_bad_parameter_at_runtime_is_rejected_and_the_old_value_kept(make_graph):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    g = make_graph()
+    g.start("hexapod_sim", "wait_for:=''")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+
+    def value(v: object) -> ParameterValue:
+        if isinstance(v, str):
+            return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=v)
+        if isinstance(v, int):
+            return ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=v)
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=v)
+
+    with ros_client(g.domain_id) as node:
+        def set_one(name: str, v: object):
+            req = SetParameters.Request(parameters=[Parameter(name=name, value=value(v))])
+            return call(node, SetParameters, "/hexapod_sim/set_parameters", req).results[0]
+
+        def get(name: str) -> ParameterValue:
+            req = GetParameters.Request(names=[name])
+            return call(node, GetParameters, "/hexapod_sim/get_parameters", req).values[0]
+
+        r = set_one("actuator.t_max", -5.0)
+        assert not r.successful
+        assert r.reason == ("parameter 'actuator.t_max' = -5.0 is invalid: allowed float in "
+                            "(0, inf]")
+        r = set_one("actuator.t_max", -5)
+        assert not r.successful and "'actuator.t_max'" in r.reason
+        assert get("actuator.t_max").double_value == 400.0
+        r = set_one("ground.k_y", -1.0)  # rclpy's range check answers first
+        assert not r.successful and "ground.k_y" in r.reason and "Min: 0.0" in r.reason
+        r = set_one("run.controller", "pd_x")
+        assert not r.successful and "allowed one of pd_p, pd_pf" in r.reason
+        assert get("run.controller").string_value == "pd_pf"
+        r = set_one("gait.velocity", 2.0)
+        assert not r.successful and "read-only" in r.reason
+        r = set_one("ground.scale", 2.0)  # a good live change goes through
+        assert r.successful and get("ground.scale").double_value == 2.0
+    assert "rejected: parameter 'actuator.t_max' = -5.0" in g.log("hexapod_sim")
+    assert g.procs["hexapod_sim"].poll() is None
+
+
+def test_two_graphs_on_two_domain_ids_do_not_see_each_other(make_graph, tmp_path):
+    nodes = "trajectory_generator,pd_pf_controller"
+    a = make_graph("a")
+    b = make_graph("b", overrides=("ground.scale:=2.0", "actuator.t_max:=150.0"))
+    assert a.domain_id != b.domain_id
+    a.start("metrics", f"bag_path:={tmp_path / 'bag_a'}")
+    for g in (a, b):
+        g.start("trajectory_generator")
+        g.start("pd_pf_controller")
+    a.start("hexapod_sim", f"wait_for:={nodes},metrics")
+    b.start("hexapod_sim", f"wait_for:={nodes}")
+    for g in (a, b):
+        g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+        # Localhost-only discovery unless the caller says otherwise (R7).
+        env = Path(f"/proc/{g.procs['pd_pf_controller'].pid}/environ").read_bytes().split(b"\0")
+        assert b"ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in env
+        assert f"ROS_DOMAIN_ID={a.domain_id if g is a else b.domain_id}".encode() in env
+
+    with ros_client(a.domain_id) as node:  # graph a, seen from its domain: one of each
+        from rclpy.executors import SingleThreadedExecutor
+
+        ex = SingleThreadedExecutor(context=node.context)
+        ex.add_node(node)
+        a.wait_for(lambda: ex.spin_once(timeout_sec=0.05) or {
+            "hexapod_sim", "metrics", "trajectory_generator", "pd_pf_controller"} <= set(
+                node.get_node_names()), 30, "graph a's nodes")
+        names = node.get_node_names()
+        ex.remove_node(node)
+    assert names.count("hexapod_sim") == 1 and names.count("pd_pf_controller") == 1
+
+    for g in (a, b):
+        assert g.stop("hexapod_sim") == 0
+        assert sim_summary(g.log("hexapod_sim"))["missed"] == 0
+    a.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+    # Graph a recorded its own run only: one message per tick, equal to the in-process
+    # loop with a's parameters (b's commands or states would have changed it).
+    with open_bag(tmp_path / "bag_a") as bag:
+        js = read_joint_state_arrays(bag, T.JOINT_STATES)
+        cmd = read_joint_state_arrays(bag, T.JOINT_COMMANDS)
+    n = len(js.stamps) - 1
+    assert n > 100 and np.array_equal(js.stamps, np.arange(n + 1) * 1_000_000)
+    assert np.array_equal(np.unique(cmd.stamps), cmd.stamps)
+    expected = run(load_params(), "pd_pf", n * 0.001)
+    np.testing.assert_allclose(js.position.reshape(-1, 6, 2), expected.obs[:, 0], atol=1e-9,
+                               rtol=0)
