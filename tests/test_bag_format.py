@@ -248,7 +248,8 @@ def test_sigkill_mid_write_leaves_readable_prefix(tmp_path: Path) -> None:
     assert proc.returncode == -signal.SIGKILL
     meta = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     with open_bag(path) as bag:
-        assert bag.truncated and 'not closed' in bag.truncation_reason
+        # the kill may land between chunks ('not closed') or inside a write (cut record)
+        assert bag.truncated and bag.truncation_reason
         arrays = read_joint_state_arrays(bag, '/hexapod/joint_states')
     n = len(arrays.stamps)
     assert n >= 100 and n >= meta['message_count'] - 1  # metadata counts flushed messages
