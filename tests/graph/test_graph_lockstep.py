@@ -6,6 +6,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
@@ -77,3 +78,14 @@ def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make
         assert float(values[name]) == getattr(expected, name)
     report = json.loads((bag / "indices.json").read_text())
     assert report["segments"][0]["last_full_cycle"]["indices"]["eps_xH"] == expected.eps_xH
+
+    # Offline analysis of the graph's bag gives the same numbers, per cycle and online.
+    from hexapod_metrics.core.analysis import analyze_bag
+
+    a = analyze_bag(bag)
+    assert not a.truncated and [c.controller for c in a.cycles] == ["pd_pf"] * 3
+    offline = a.cycles[-1].indices
+    online = {c: idx for c, _, idx in a.online}
+    for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF"):
+        assert getattr(offline, name) == pytest.approx(getattr(expected, name), rel=1e-12)
+        assert getattr(online[2], name) == pytest.approx(getattr(offline, name), rel=1e-12)
