@@ -14,9 +14,10 @@ architectures wait for the same set, so their timing is the same): the demanded 
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
 ``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the
-architecture's name. References and foot forces are buffered by stamp (those older than
-the newest state are dropped), so a controller that is not in charge is ready to take over
-at any tick boundary.
+architecture's name. References and foot forces queue in their subscriptions without
+waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken when a state
+names this controller, so a controller that is not in charge costs one wake-up per tick
+and is ready to take over at any tick boundary.
 """
 from __future__ import annotations
 
@@ -95,7 +96,7 @@ class ControllerNode(LifecycleNode):
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
         self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
-                               f"{tuple(float(g) for g in self.gains)}")
+                      f"{tuple(float(g) for g in self.gains)}")
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -107,7 +108,7 @@ class ControllerNode(LifecycleNode):
                 C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
         self.active = True
         self.log.info("active: answering the states that name "
-                               f"'{self.arch}' as the controller in charge")
+                      f"'{self.arch}' as the controller in charge")
         return ret
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:

@@ -6,13 +6,13 @@ way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCA
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
 transient-local) and every parameter in the bag's ``custom_data``. The log time of a
-message is its stamp (simulated time); messages without a stamp (the active controller)
-get the latest ``/clock``. The node takes its messages in batches (``batch_interval``,
-default 5 ms) so that it does not compete with the control loop for the CPU; the queues
-(10000 messages per topic) cover seconds of lag. SIGINT and SIGTERM stop the node cleanly:
-the messages already received are taken and written, the bag is closed (summary and
-``metadata.yaml``) and ``indices.json`` is written. After a SIGKILL the bag stays readable
-up to its last flushed chunk (at most ~1 s of data lost).
+message is its stamp (simulated time); messages without a stamp of their own (the active
+controller, the markers) get the latest ``/clock``. The node takes its messages in
+batches (``batch_interval``, default 5 ms) so that it does not compete with the control
+loop for the CPU; the queues (10000 messages per topic) cover seconds of lag. SIGINT and
+SIGTERM stop the node cleanly: the messages already received are taken and written, the
+bag is closed (summary and ``metadata.yaml``) and ``indices.json`` is written. After a
+SIGKILL the bag stays readable up to its last flushed chunk (at most ~1 s of data lost).
 
 Indices: the seven indices (:func:`hexapod_metrics.core.indices.compute_indices`) of each gait
 cycle c, over the ticks k_a = c N .. k_b = (c + 1) N with N = T / Delta t (the sums run
@@ -190,12 +190,16 @@ class MetricsNode(Node):
                 self.clock_ns = max(self.clock_ns, C.decode_stamp(data))
                 self.writer.write(topic, C.decode_stamp(data), data)
                 self.counts[topic] += 1
+        elif topic == T.MARKERS:  # no header of its own: log at the latest clock
+            def cb(data: bytes, topic: str = topic) -> None:
+                self.writer.write(topic, self.clock_ns, data)
+                self.counts[topic] += 1
         elif topic == T.ACTIVE_CONTROLLER:
             def cb(data: bytes, topic: str = topic) -> None:
                 self.writer.write(topic, self.clock_ns, data)
                 self.counts[topic] += 1
                 self.log.info(f"controller in charge: {C.decode_string(data)} "
-                                       f"(sim time {self.clock_ns * 1e-9:.3f} s)")
+                              f"(sim time {self.clock_ns * 1e-9:.3f} s)")
         else:  # stamped: joint_commands, status
             def cb(data: bytes, topic: str = topic) -> None:
                 self.writer.write(topic, C.decode_stamp(data), data)

@@ -22,23 +22,31 @@ Modes (parameter ``sim.mode``):
   control period each (real-time pacing, not the full timeout); after ``sim.hold_time``
   simulated seconds of missed ticks the sim falls back to joint damping
   T = -sim.fallback_damping * dtheta (saturated). The first valid command ends both.
-* ``realtime``: ticks are paced by the wall clock (tick k published at t0 + k * period);
-  at the end of each period the newest command of the controller in charge is applied.
-  A period whose own command did not arrive counts as *missed*; a command that arrives
-  after its period counts as *late*. Silence and fallback as in lockstep.
+* ``realtime``: ticks are paced by the wall clock (tick k published at t0 + k * period; tick
+  0 waits for its command as in lockstep and starts the clock). A command that arrives in
+  its period is applied at once and the next tick is integrated and serialized ahead, to
+  go out on time; at the end of a period without its command (*missed*) the newest
+  command of the controller in charge is applied (one that arrived after its period counts
+  as *late*), else the torque is held. Silence and fallback as in lockstep.
 
 Switching: setting ``run.controller`` (standard parameter service, e.g. ``hexapod switch``)
 takes effect at the next tick boundary: the next state message names the new controller,
-which answers it (it has buffered the reference and foot forces all along), so no tick is
-lost; the switch is published on ``/hexapod/active_controller`` (transient-local) and
-logged with its tick. Ground and actuator parameters change live at the next tick boundary.
+which answers it (its subscriptions hold the recent reference and foot forces), so no tick
+is lost; the switch is published on ``/hexapod/active_controller`` (transient-local) and
+logged with its tick, and ticks missed within the next 3 are counted apart. Ground and
+actuator parameters change live at the next tick boundary.
+
+Status: ``/hexapod/status`` (diagnostic_msgs/DiagnosticArray, every 0.5 s of wall time):
+mode, simulated time and tick, controller in charge, missed / late / on-time ticks,
+fallback on/off, switches, real-time factor, and the round trip state -> command.
 
 A switch can also be scripted: parameters ``switch_at`` (simulated s) and ``switch_to``
 make the sim set its own ``run.controller`` at that tick (scripts/run_graph.sh uses it).
 
 Start: tick 0 is published once the nodes named in ``wait_for`` show their endpoints in
 the graph and the sim's publishers and subscription are matched with them (at most
-``startup_timeout`` s, then it starts anyway and says what is missing). Stop: at
+``startup_timeout`` s, then it starts anyway and says what is missing); the expected
+controllers are asked their lifecycle state (a warning if one is not active). Stop: at
 ``run.duration`` if ``stop_at_end`` (after publishing the last sample), or on
 SIGINT/SIGTERM; a summary line is logged either way. Divergence of the model is logged
 as an error and ends the process with exit code 1.
@@ -144,8 +152,8 @@ class SimNode(Node):
         self.finished = False
         self.missed = self.late = self.on_time = self.foreign = self.resyncs = 0
         self.silent_ticks = 0
-        # Logging costs ~1 ms a call (rclpy inspects the caller): never per tick. Lockstep
-        # warns at the first timeout; realtime after 10 ms without any command.
+        # Never log per tick. Lockstep warns at the first timeout; realtime after 10 ms
+        # without any command.
         self.warn_after = 1 if self.mode == "lockstep" else max(1, round(0.01 / self.period))
         self.warned = False
         self.fallback = False
@@ -178,7 +186,7 @@ class SimNode(Node):
         if "run.controller" in names and p.run.controller != self.in_charge:
             self.pending_controller = p.run.controller
             self.log.info(f"switch to {p.run.controller} requested: takes effect at "
-                                   f"the next tick boundary")
+                          f"the next tick boundary")
         if any(n.startswith(("ground.", "actuator.")) for n in names):
             self.pending_params = p
 
@@ -210,9 +218,8 @@ class SimNode(Node):
     def _check_controllers(self) -> None:
         """Ask each expected controller its lifecycle state (and say if it is not active).
 
-        Also warms up the path from each controller's process to this one: the first message
-        between two processes maps shared memory and costs milliseconds, which in realtime
-        mode would fall on the first tick after a switch.
+        This also makes the first exchange between the two processes (slower: shared memory
+        is mapped) happen before tick 0 rather than at the first tick after a switch.
         """
         from lifecycle_msgs.srv import GetState
 
@@ -233,7 +240,7 @@ class SimNode(Node):
         self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
         if self.wait_for:
             self.log.info(f"waiting for {', '.join(self.wait_for)} "
-                                   f"(at most {self.startup_timeout:g} s)")
+                          f"(at most {self.startup_timeout:g} s)")
             ready = self.loop.spin(until=lambda: not self.graph_missing(),
                                    timeout=self.startup_timeout)
             if self.loop.stopped:
@@ -244,6 +251,8 @@ class SimNode(Node):
                     f"{self.startup_timeout:g} s: check that those nodes run on this "
                     f"ROS_DOMAIN_ID)")
             self._check_controllers()
+            if self.loop.stopped:
+                return
         self.log.info(
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
@@ -274,12 +283,13 @@ class SimNode(Node):
     def _send(self) -> None:
         """Publish the prepared tick and arm the deadline of its command."""
         k, stamp, out = self.prepared
-        for pub, data in out:
-            pub.publish(data)
         self.stamp = stamp
         self.answered = False
         self.advanced = False
-        now = self.published_at = time.monotonic()
+        self.published_at = time.monotonic()  # the round trip counts from here
+        for pub, data in out:
+            pub.publish(data)
+        now = time.monotonic()
         if self.stop_at_end and k >= self.end_tick:
             self.finished = True
             self.loop.set_deadline(None)
@@ -415,7 +425,7 @@ class SimNode(Node):
             self.warned = self.fallback = False
             k = self.physics.tick
             self.log.info(f"switched {old} -> {self.in_charge} at tick {k} "
-                                   f"(t = {k * self.period:.3f} s)")
+                          f"(t = {k * self.period:.3f} s)")
             self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
         self._prepare()
 
@@ -447,6 +457,8 @@ class SimNode(Node):
             "switches": str(self.switches), "missed_after_switch": str(self.missed_after_switch),
             "real_time_factor": f"{self.rtf:.3f}",
             "resyncs": str(self.resyncs), "end_tick": str(self.end_tick),
+            "round_trip_median_ms": f"{self.latency_ms(0.5):.3f}",
+            "round_trip_p99_ms": f"{self.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
         }
         return C.Status("hexapod_sim", level, msg, values)
