@@ -31,6 +31,9 @@ def params_arguments(parser: argparse.ArgumentParser) -> None:
                         help="actuator saturation T_max in N m ('inf' for ideal actuators)")
     parser.add_argument("--ground-scale", type=float, dest="ground_scale",
                         help="factor on all four ground parameters (1.0 = 100 %%)")
+    parser.add_argument("--control-rate", type=float, dest="control_rate", metavar="HZ",
+                        help="control rate in Hz: sim.control_period = 1/HZ, a whole number "
+                        "of physics steps (10000 = control at every step)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override any parameter by its dotted name, e.g. gait.velocity=0.8")
 
@@ -47,6 +50,11 @@ def params_from_args(args: argparse.Namespace) -> HexapodParams:
         overrides["actuator.t_max"] = args.t_max
     if args.ground_scale is not None:
         overrides["ground.scale"] = args.ground_scale
+    if args.control_rate is not None:
+        if not args.control_rate > 0 or args.control_rate == float("inf"):
+            raise HexapodError(f"--control-rate: expected a positive number of Hz, got "
+                               f"{args.control_rate:g}")
+        overrides["sim.control_period"] = 1.0 / args.control_rate
     return load_params(args.params, **overrides)
 
 
@@ -61,7 +69,7 @@ def _fmt(v: float) -> str:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from .core.indices import INDEX_NAMES, INDEX_UNITS
+    from .core.indices import INDEX_NAMES, REPORTED_NAMES, INDEX_UNITS
     from .core.simulate import simulate
 
     p = params_from_args(args)
@@ -96,7 +104,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
               " (columns name the starting controller)")
     header = f"{'index':<8} {'unit':<12}" + "".join(f"{c:>14}" for c in controllers)
     print(header)
-    for name in INDEX_NAMES + ("L",):
+    for name in REPORTED_NAMES:
         row = f"{name:<8} {INDEX_UNITS[name]:<12}"
         for c in controllers:
             idx = results[c].indices

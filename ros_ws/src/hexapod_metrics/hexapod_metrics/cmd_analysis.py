@@ -42,10 +42,16 @@ def _backend_args(parser: argparse.ArgumentParser) -> None:
 
 
 def _backend(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The backend the options name; its workers stop when the command ends."""
+    import atexit
+
     from .core.parallel import make_backend
 
     name = args.backend or ("dask" if args.dask else "processes")
-    return make_backend(name, args.dask)
+    backend = make_backend(name, args.dask)
+    if hasattr(backend, "close"):
+        atexit.register(backend.close)
+    return backend
 
 
 def _floats(text: str) -> list[float]:
@@ -73,18 +79,21 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     controllers = tuple(args.controllers.split(","))
+    runs = 3 if args.check else 1
     results = []
     if args.kind == "ground":
         for t_max in _floats(args.t_max_list):
-            n = len(_floats(args.range)) * len(controllers)
+            n = len(_floats(args.range)) * len(controllers) * runs
             res = ground_sweep(p, _floats(args.range), t_max, controllers=controllers,
-                               backend=backend, progress=prog(f"ground sweep T_max {t_max:g}", n))
+                               backend=backend, check=args.check,
+                               progress=prog(f"ground sweep T_max {t_max:g}", n))
             results.append((f"ground_tmax{t_max:g}", res, 100.0,
                             "% of base ground (K_x, K_y, B_x, B_y)", True))
     else:
         vals = _floats(args.range)
         res = t_max_sweep(p, vals, p.ground.scale, controllers=controllers, backend=backend,
-                          progress=prog("T_max sweep", len(vals) * len(controllers)))
+                          check=args.check,
+                          progress=prog("T_max sweep", len(vals) * len(controllers) * runs))
         results.append(("tmax", res, 1.0, "T_max (N m)", False))
     for tag, res, xs, xl, logx in results:
         rows = res.rows()
@@ -97,13 +106,50 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             plots.sweep_plot(res, (name,), out / f"sweep_{tag}_{name}.png",
                              f"{name}: {tag}", x_scale=xs, x_label=xl, log_x=logx)
         print(f"{res.variable} sweep ({', '.join(f'{k}={v:g}' for k, v in res.fixed.items())})")
-        print(f"{'value':>10} {'controller':>10} " + " ".join(f"{n:>10}" for n in INDEX_NAMES))
+        print(f"{'value':>10} {'controller':>10} " + " ".join(f"{n:>10}" for n in INDEX_NAMES)
+              + (" converged" if args.check else ""))
         for r in rows:
             vals = " ".join(f"{r[n]:>10.4g}" if not math.isnan(r[n]) else f"{'diverged':>10}"
                             for n in INDEX_NAMES)
+            if args.check:
+                vals += "  yes" if r["converged"] else f"  NO ({r['unconverged']})"
             print(f"{r[res.variable] * xs:>10.4g} {r['controller']:>10} {vals}")
     print(f"results and plots in {out}")
     return 0
+
+
+def _cmd_converge(args: argparse.Namespace) -> int:
+    from hexapod_control.core.closed_loop import Case
+
+    from .core.convergence import REFINEMENTS, check_cases, tolerance
+
+    p = params_from_args(args)
+    if args.backend is None and not args.dask:
+        args.backend = "inline"  # a handful of runs: one batch in this process
+    controllers = ["pd_p", "pd_pf"] if args.controller == "both" else [
+        args.controller or p.run.controller]
+    total = len(controllers) * len(REFINEMENTS)
+    checks = check_cases([Case(p, c) for c in controllers], p.run.duration, _backend(args),
+                         progress_factory(not args.no_progress)("convergence", total))
+    doc = {}
+    print(f"dt = {p.sim.dt:g} s, control period = {p.sim.control_period:g} s "
+          f"({1.0 / p.sim.control_period:g} Hz), T_max = {p.actuator.t_max:g} N m, "
+          f"ground = {100 * p.ground.scale:g} %")
+    for c, cv in zip(controllers, checks):
+        doc[c] = cv.as_dict()
+        print(f"\n{c}: {'CONVERGED' if cv.converged else 'NOT CONVERGED'}"
+              + (f" ({', '.join(cv.unconverged())})" if not cv.converged else ""))
+        print(f"{'index':<8} {'dt':>12} {'dt/2':>12} {'dt/4':>12} {'dt/2->dt/4':>11} verdict")
+        for n in INDEX_NAMES:
+            vals = "".join(f"{getattr(r, n):>13.6g}" if r else f"{'diverged':>13}"
+                           for r in cv.runs)
+            ch = cv.change(n)
+            ok = cv.index_converged(n)
+            tol = "" if cv.diverged else f" (tolerance {tolerance(n, getattr(cv.runs[2], n)):.3g})"
+            print(f"{n:<8}{vals} {100 * ch:>9.3g} %  {'ok' if ok else 'MOVES'}{tol}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(doc, indent=1, default=float))
+    return 0 if all(cv.converged for cv in checks) or not args.strict else 1
 
 
 def _cmd_tune(args: argparse.Namespace) -> int:
@@ -145,7 +191,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     verdicts = reproduce(p, Path(args.out), _backend(args), plan,
                          progress_factory(not args.no_progress))
     for v in verdicts:
-        print(f"{v.claim} {'holds' if v.holds else 'FAILS'}: {v.statement}")
+        print(f"{v.claim} {v.status.upper()}: {v.statement}")
         print(f"    {v.evidence}")
     print(f"report written to {Path(args.out) / 'README.md'}")
     return 0
@@ -163,8 +209,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
                     help="ground sweep: T_max values, one sweep each (default 400,170)")
     sp.add_argument("--controllers", default="pd_p,pd_pf")
     sp.add_argument("--out", default="sweeps", help="output directory (CSV, JSON, PNG)")
+    sp.add_argument("--check", action="store_true",
+                    help="rerun every point at dt/2 and dt/4 and report its convergence")
     _backend_args(sp)
     sp.set_defaults(func=_cmd_sweep)
+
+    cp = sub.add_parser("converge", help="rerun a case at dt/2 and dt/4: is it converged?")
+    params_arguments(cp)
+    cp.add_argument("--controller", choices=["pd_p", "pd_pf", "both"], default="both")
+    cp.add_argument("--json", help="write the three runs and the verdicts to this file")
+    cp.add_argument("--strict", action="store_true",
+                    help="exit with code 1 if a controller's indices are not converged")
+    _backend_args(cp)
+    cp.set_defaults(func=_cmd_converge)
 
     tp = sub.add_parser("tune", help="brute-force gain search (E5)")
     params_arguments(tp)
@@ -177,10 +234,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     _backend_args(tp)
     tp.set_defaults(func=_cmd_tune)
 
-    rp = sub.add_parser("reproduce", help="run E1-E5 and write the report")
+    rp = sub.add_parser("reproduce", help="run E1-E6, check every point in dt, write the report")
     params_arguments(rp)
     rp.add_argument("--out", default="report", help="report directory (default report/)")
-    rp.add_argument("--quick", action="store_true", help="a few points per experiment")
+    rp.add_argument("--quick", action="store_true",
+                    help="a few points per experiment (every point still checked in dt)")
     _backend_args(rp)
     rp.set_defaults(func=_cmd_reproduce)
 

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from .core.analysis import BagAnalysis, analyze_bag
-from .core.indices import INDEX_NAMES, Indices
+from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, lag_growth
 
 
 def _fmt(idx: Indices | None, name: str) -> str:
@@ -21,12 +21,12 @@ def _rows(a: BagAnalysis) -> list[dict[str, object]]:
         rows.append({"bag": str(a.path), "kind": "segment", "controller": s.controller,
                      "cycle": "", "t_start": s.t_start, "t_end": s.t_end, "cycles": s.cycles,
                      **{n: getattr(s.indices, n) if s.indices else math.nan
-                        for n in INDEX_NAMES + ("L",)}})
+                        for n in REPORTED_NAMES}})
     for c in a.cycles:
         idx = c.indices
         rows.append({"bag": str(a.path), "kind": "cycle", "controller": c.controller,
                      "cycle": c.cycle, "t_start": c.t_a, "t_end": c.t_b, "cycles": 1,
-                     **{n: getattr(idx, n) if idx else math.nan for n in INDEX_NAMES + ("L",)}})
+                     **{n: getattr(idx, n) if idx else math.nan for n in REPORTED_NAMES}})
     return rows
 
 
@@ -44,18 +44,24 @@ def _print(analyses: list[BagAnalysis], per_cycle: bool) -> None:
     width = max([14] + [len(h) + 1 for h in heads])
     print(f"\n{'segment':<8}" + "".join(f"{h:>{width}}" for h in heads))
     print(f"{'cycles':<8}" + "".join(f"{s.cycles:>{width}}" for _, s in cols))
-    for n in INDEX_NAMES + ("L",):
+    for n in REPORTED_NAMES:
         print(f"{n:<8}" + "".join(f"{_fmt(s.indices, n):>{width}}" for _, s in cols))
     if per_cycle:
         for a in analyses:
             print(f"\n{a.path.name}: per gait cycle")
             print(f"{'cycle':>5} {'t_a':>7} {'controller':>10} " +
-                  " ".join(f"{n:>10}" for n in INDEX_NAMES))
+                  " ".join(f"{n:>10}" for n in INDEX_NAMES + ("lag_xH",)) +
+                  f" {'lag growth':>10}")
+            prev = None
             for c in a.cycles:
                 idx = c.indices
-                vals = (" ".join(f"{_fmt(idx, n):>10}" for n in INDEX_NAMES) if idx else
+                growth = lag_growth(prev.indices, idx) if prev is not None and \
+                    prev.cycle == c.cycle - 1 else math.nan
+                vals = (" ".join(f"{_fmt(idx, n):>10}" for n in INDEX_NAMES + ("lag_xH",))
+                        + f" {growth:>10.3g}" if idx else
                         f"incomplete: {c.missing} ticks missing")
                 print(f"{c.cycle:>5} {c.t_a:>7.3g} {c.controller:>10} {vals}")
+                prev = c
 
 
 def _plots(analyses: list[BagAnalysis], out: Path) -> list[Path]:

@@ -45,7 +45,7 @@ from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_par
 from .core import cdr
 from .core.bag_writer import BagWriter
 from .core.errors import BagError
-from .core.indices import INDEX_NAMES, Indices, compute_indices
+from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
 from .core.recording import TOPICS, bag_custom_data, indices_status
 
 #: The state topics a cycle's indices need, all stamped per tick.
@@ -141,7 +141,7 @@ class CycleScorer:
                          "cycles": [c["cycle"] for c in full],
                          "last_full_cycle": full[-1] if full else None})
         return {"control_period": self.period, "ticks_per_cycle": self.n,
-                "index_names": list(INDEX_NAMES) + ["L"], "segments": segs,
+                "index_names": list(REPORTED_NAMES), "segments": segs,
                 "cycles": self.cycles}
 
 
@@ -207,10 +207,14 @@ class MetricsNode(Node):
         self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
 
     def _publish_cycle(self, cycle: dict[str, Any]) -> None:
-        self.scorer.cycles.append(cycle)
+        prev = self.scorer.cycles[-1] if self.scorer.cycles else None
         idx = Indices(**cycle["indices"])
+        growth = lag_growth(Indices(**prev["indices"]), idx) \
+            if prev is not None and prev["cycle"] == cycle["cycle"] - 1 else float("nan")
+        cycle["lag_growth"] = growth
+        self.scorer.cycles.append(cycle)
         status = indices_status(idx, cycle["controller"], cycle["cycle"], cycle["t_a"],
-                                cycle["t_b"])
+                                cycle["t_b"], growth)
         stamp = T.stamp_ns(cycle["t_b"])
         data = cdr.encode_diagnostic_array(stamp, [status])
         self.pub_indices.publish(data)
@@ -219,7 +223,9 @@ class MetricsNode(Node):
         self.log.info(
             f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
             f"({cycle['controller']}): "
-            + ", ".join(f"{n} {cycle['indices'][n]:.4g}" for n in INDEX_NAMES))
+            + ", ".join(f"{n} {cycle['indices'][n]:.4g}" for n in INDEX_NAMES)
+            + f"; hip lag {cycle['indices']['lag_xH']:.4g} m ({growth:+.3g} m since the last "
+            "cycle)")
 
     def close(self) -> None:
         """Take what is queued, close the bag, write indices.json; idempotent."""

@@ -64,8 +64,8 @@ def _batch_kernel(S, Ps, codes, G, theta_d, theta_vel_d, substeps, rec_offset, o
     for c in prange(S.shape[0]):
         torque = np.zeros((N_LEGS, 2))
         cmd = np.empty((obs_out.shape[1], N_LEGS, 2))
-        done = run_ticks(S[c], Ps[c], codes[c], G[c], theta_d, theta_vel_d, torque, substeps,
-                         0, obs_out[c], cmd, rec_offset)
+        done = run_ticks(S[c], Ps[c], codes[c], G[c], theta_d, theta_vel_d, torque,
+                         substeps[c], 0, obs_out[c], cmd, rec_offset)
         if done == n_ticks:
             last = n_ticks - rec_offset
             if 0 <= last < obs_out.shape[1]:
@@ -171,24 +171,28 @@ class BatchResult:
     ok: np.ndarray
 
 
-def _shared_reference_key(p: HexapodParams) -> tuple:
-    return (p.robot, p.gait, p.sim.dt, p.sim.control_period)
+def shared_reference_key(p: HexapodParams) -> tuple[object, ...]:
+    """What cases of one batch must share: the reference trajectory at the control ticks
+    depends on the robot, the gait and the control period (not on the physics step)."""
+    return (p.robot, p.gait, p.sim.control_period)
 
 
 def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> BatchResult:
     """Run every case for ``duration`` s in parallel; keep the ticks from ``record_from`` s on.
 
-    All cases must share robot geometry, gait and timing (they differ in ground, actuator,
-    body and gains), so that they share one reference trajectory.
+    All cases must share robot geometry, gait and control period (they differ in ground,
+    actuator, body, gains and physics step ``sim.dt``), so that they share one reference
+    trajectory at the control ticks.
     """
     if not cases:
         raise ValueError("run_batch needs at least one case")
     p0 = cases[0].params
-    key = _shared_reference_key(p0)
+    key = shared_reference_key(p0)
     for c in cases:
-        if _shared_reference_key(c.params) != key:
+        if shared_reference_key(c.params) != key:
             raise ParameterError("gait", "differs between cases",
-                                 "one robot, gait and timing per batch (split the batch)")
+                                 "one robot, gait and control period per batch (split the "
+                                 "batch)")
     n = tick_count(p0, duration)
     k_a = int(math.floor(record_from / p0.sim.control_period + 1e-9))
     if not 0 <= k_a <= n:
@@ -201,10 +205,11 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     G = np.stack([gain_vector(c.params.gains(c.controller)) for c in cases])
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
-    _batch_kernel(S, Ps, codes, G, ref.theta[:n], ref.theta_vel[:n], p0.substeps, k_a, obs, ok)
+    substeps = np.array([c.params.substeps for c in cases], dtype=np.int64)
+    _batch_kernel(S, Ps, codes, G, ref.theta[:n], ref.theta_vel[:n], substeps, k_a, obs, ok)
     window_ref = Reference(*(a[k_a:] for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
 
 
 __all__ = ["BLOCK_TICKS", "BatchResult", "Case", "RunResult", "run", "run_batch", "run_ticks",
-           "tick_count"]
+           "shared_reference_key", "tick_count"]

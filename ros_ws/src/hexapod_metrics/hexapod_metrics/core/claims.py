@@ -1,111 +1,252 @@
 """The paper's claims C1-C4 (model.md, "What the paper claims") as explicit, checkable rules.
 
-Each function takes experiment results and returns a :class:`Verdict` with the numbers that
-decide it. The thresholds are ours (the paper gives none) and are stated in each rule.
+Each rule is built from comparisons of numbers that carry a convergence check
+(:class:`Measured`: the value at dt and the band it spans over dt, dt/2, dt/4). A comparison
+is *decided* when both numbers are converged and the margin exceeds the two bands; else it is
+undecided. A claim that needs all its comparisons (C1, C2, C3) fails if one decided comparison
+fails, is undecided if none fails but one is undecided, and holds otherwise; a claim that
+needs any one of its signs (C4) holds if one is decided true. The thresholds are ours (the
+paper gives none) and are stated in each rule.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Iterable, Mapping, Sequence
 
-import numpy as np
+from .convergence import TRACKING, Convergence
 
-from .experiments import SweepResult
-from .indices import Indices
-
-TRACKING = ("eps_xH", "eps_yH", "eps_xF", "eps_yF")
 #: C3: "large degradation" = the summed tracking errors at least this many times the T_max 400 value.
 C3_FACTOR = 2.0
 #: C4: "stability problems" = divergence, or errors or torque steps this many times worse.
 C4_FACTOR = 2.0
 
+HOLDS, FAILS, UNDECIDED = "holds", "fails", "undecided"
+#: A three-valued truth: True, False, or None (undecided).
+Tri = bool | None
+
+
+@dataclass(frozen=True)
+class Measured:
+    """A number at dt with its band [lo, hi] over dt, dt/2, dt/4 and its convergence verdict.
+
+    ``value`` NaN means the run diverged (at some step size, if ``converged`` is False).
+    """
+
+    value: float
+    lo: float
+    hi: float
+    converged: bool
+
+    @staticmethod
+    def exact(value: float) -> "Measured":
+        """A number without step-size uncertainty (an unchecked run taken at its word)."""
+        return Measured(value, value, value, True)
+
+    @staticmethod
+    def of(conv: Convergence, name: str) -> "Measured":
+        """Index ``name`` of a convergence check."""
+        if all(r is None for r in conv.runs):  # diverged at every step size: decided
+            return Measured(math.nan, math.nan, math.nan, True)
+        idx = conv.value
+        value = math.nan if idx is None else float(getattr(idx, name))
+        lo, hi = conv.band(name)
+        return Measured(value, lo, hi, conv.index_converged(name))
+
+    @property
+    def diverged(self) -> bool:
+        """The run at dt blew up."""
+        return math.isnan(self.value)
+
+    def text(self, digits: int = 4) -> str:
+        """'0.0274' or '0.0274 (unconverged, 0.0253-0.0573)'; 'diverged'."""
+        if self.diverged:
+            return "diverged"
+        s = f"{self.value:.{digits}g}"
+        if not self.converged:
+            s += f" (unconverged, {self.lo:.{digits}g}-{self.hi:.{digits}g})"
+        return s
+
+
+def less(a: Measured, b: Measured) -> Tri:
+    """a < b, decided only if both converged and the margin exceeds both bands.
+
+    A diverged b (and a finite a) counts as a decided 'a is better'; a diverged a as
+    decided worse; both diverged: undecided.
+    """
+    if a.diverged or b.diverged:
+        if a.diverged and b.diverged:
+            return None
+        if not (a.converged and b.converged):
+            return None
+        return b.diverged
+    if not (a.converged and b.converged):
+        return None
+    if a.hi < b.lo:
+        return True
+    if a.lo > b.hi:
+        return False
+    return None  # the bands overlap: the margin lies within the convergence bands
+
+
+def at_least(a: Measured, threshold: float) -> Tri:
+    """a >= threshold, decided if a converged and its band lies on one side."""
+    if a.diverged or not a.converged:
+        return None
+    if a.lo >= threshold:
+        return True
+    if a.hi < threshold:
+        return False
+    return None
+
+
+def all3(values: Iterable[Tri]) -> Tri:
+    """Three-valued AND: False if any is False, else None if any is None, else True."""
+    vals = list(values)
+    if any(v is False for v in vals):
+        return False
+    return None if any(v is None for v in vals) else True
+
+
+def any3(values: Iterable[Tri]) -> Tri:
+    """Three-valued OR: True if any is True, else None if any is None, else False."""
+    vals = list(values)
+    if any(v is True for v in vals):
+        return True
+    return None if any(v is None for v in vals) else False
+
+
+def status_of(t: Tri) -> str:
+    """'holds' | 'fails' | 'undecided'."""
+    return UNDECIDED if t is None else (HOLDS if t else FAILS)
+
 
 @dataclass(frozen=True)
 class Verdict:
-    """One claim, whether it holds in our model, the rule and the deciding numbers."""
+    """One claim: holds, fails or undecided in our model, the rule and the deciding numbers."""
 
     claim: str
     statement: str
-    holds: bool
+    status: str
     rule: str
     evidence: str
 
+    @property
+    def holds(self) -> bool:
+        """True only for a decided 'holds'."""
+        return self.status == HOLDS
 
-def _tracking_sum(idx: Indices | None) -> float:
-    return math.inf if idx is None else sum(getattr(idx, n) for n in TRACKING)
+
+def total(parts: Sequence[Measured]) -> Measured:
+    """Sum of numbers; its band is the sum of the bands (conservative)."""
+    return Measured(sum(p.value for p in parts), sum(p.lo for p in parts),
+                    sum(p.hi for p in parts), all(p.converged for p in parts))
 
 
-def c1(pd_p: Indices, pd_pf: Indices) -> Verdict:
+def _ratio(a: Measured, b: Measured) -> Measured:
+    """a / b with the band of the extreme ratios (both positive)."""
+    if a.diverged or b.diverged:
+        return Measured(math.inf if a.diverged else math.nan, math.nan, math.nan, False)
+    return Measured(a.value / b.value, a.lo / b.hi, a.hi / b.lo, a.converged and b.converged)
+
+
+Point = Mapping[str, Measured]  # index name -> measured value, for one case
+
+
+def c1(pd_p: Point, pd_pf: Point) -> Verdict:
     """C1: base case, T_max 400: PD-P&F tracks hip and foot better and needs less torque."""
-    better = {n: getattr(pd_pf, n) < getattr(pd_p, n) for n in TRACKING}
-    less_torque = pd_pf.T_L < pd_p.T_L
-    ev = "; ".join(f"{n} {getattr(pd_pf, n):.4g} vs {getattr(pd_p, n):.4g} m" for n in TRACKING)
-    ev += f"; T_L {pd_pf.T_L:.4g} vs {pd_p.T_L:.4g}; E_av {pd_pf.E_av:.4g} vs {pd_p.E_av:.4g}"
+    names = TRACKING + ("T_L",)
+    cmp = {n: less(pd_pf[n], pd_p[n]) for n in names}
+    ev = "; ".join(f"{n} {pd_pf[n].text()} vs {pd_p[n].text()} ({status_of(cmp[n])})"
+                   for n in names)
+    ev += f"; E_av {pd_pf['E_av'].text()} vs {pd_p['E_av'].text()}"
     return Verdict("C1", "Base, T_max 400: PD-P&F tracks hip and foot better than PD-P and "
-                   "needs less joint torque", all(better.values()) and less_torque,
-                   "all four tracking errors and T_L of PD-P&F below PD-P's",
-                   "PD-P&F vs PD-P: " + ev)
+                   "needs less joint torque", status_of(all3(cmp.values())),
+                   "all four tracking errors and T_L of PD-P&F below PD-P's, each margin "
+                   "beyond both dt-convergence bands", "PD-P&F vs PD-P: " + ev)
 
 
-def c2(sweeps: Mapping[float, SweepResult]) -> Verdict:
-    """C2: over the ground sweep at each T_max, PD-P&F's hip and foot errors below PD-P's."""
-    parts, ok = [], True
-    for t_max, res in sweeps.items():
-        for n in TRACKING:
-            a, b = res.index("pd_pf", n), res.index("pd_p", n)
-            wins = np.where(np.isnan(a), False, np.isnan(b) | (a < b))
-            ok &= bool(wins.all())
-            losing = [f"{100 * v:.3g} %" for v, w in zip(res.values, wins) if not w]
-            parts.append(f"T_max {t_max:g}, {n}: {wins.sum()}/{len(wins)} points" +
-                         (f" (not at {', '.join(losing)})" if losing else ""))
-    return Verdict("C2", "Ground sweep at T_max 400 and 170: PD-P&F's hip and foot errors "
-                   "stay below PD-P's over the whole range", ok,
-                   "every tracking error of PD-P&F below PD-P's at every ground percentage",
-                   "; ".join(parts))
-
-
-def c3(strong: Mapping[str, Indices | None], base: Mapping[str, Indices], t_max: float
+def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[float]
        ) -> Verdict:
+    """C2: over the ground sweep at each T_max, PD-P&F's hip and foot errors below PD-P's.
+
+    ``sweeps[t_max][controller][k]`` is the point at ground ``values[k]`` (a scale).
+    """
+    parts, results = [], []
+    for t_max, by_c in sweeps.items():
+        for n in TRACKING:
+            cmp = [less(a[n], b[n]) for a, b in zip(by_c["pd_pf"], by_c["pd_p"])]
+            results += cmp
+            lose = [f"{100 * v:.3g} %" for v, r in zip(values, cmp) if r is False]
+            open_ = [f"{100 * v:.3g} %" for v, r in zip(values, cmp) if r is None]
+            text = f"T_max {t_max:g}, {n}: below at {sum(r is True for r in cmp)}/{len(cmp)}"
+            if lose:
+                text += f"; above at {', '.join(lose)}"
+            if open_:
+                text += f"; undecided at {', '.join(open_)}"
+            parts.append(text)
+    return Verdict("C2", "Ground sweep at T_max 400 and 170: PD-P&F's hip and foot errors "
+                   "stay below PD-P's over the whole range", status_of(all3(results)),
+                   "every tracking error of PD-P&F below PD-P's at every ground percentage, "
+                   "each margin beyond both dt-convergence bands", "; ".join(parts))
+
+
+def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float) -> Verdict:
     """C3: T_max < 160: large degradation of the indices for both controllers."""
-    ratios = {c: _tracking_sum(strong[c]) / _tracking_sum(base[c]) for c in base}
-    ev = "; ".join(f"{c}: tracking errors x{r:.3g} (eps_xH {_fmt(strong[c], 'eps_xH')} vs "
-                   f"{base[c].eps_xH:.4g} m)" for c, r in ratios.items())
+    ratios = {c: _ratio(total([strong[c][n] for n in TRACKING]),
+                        total([base[c][n] for n in TRACKING])) for c in base}
+    cmp = {c: (True if strong[c]["eps_xH"].diverged and strong[c]["eps_xH"].converged
+               else at_least(r, C3_FACTOR)) for c, r in ratios.items()}
+    ev = "; ".join(f"{c}: tracking errors x{r.text(3)} (eps_xH {strong[c]['eps_xH'].text()} "
+                   f"vs {base[c]['eps_xH'].text()} m)" for c, r in ratios.items())
     return Verdict("C3", "T_max < 160: large degradation of the indices for both controllers",
-                   all(r >= C3_FACTOR for r in ratios.values()),
+                   status_of(all3(cmp.values())),
                    f"at T_max {t_max:g} the summed tracking errors are >= {C3_FACTOR:g}x "
-                   "their T_max 400 value for both controllers (or the run diverges)", ev)
+                   "their T_max 400 value for both controllers (or the run diverges), over "
+                   "the whole dt-convergence band", ev)
 
 
-def c4(ideal: SweepResult, torque_step: Mapping[str, Mapping[float, float]]) -> Verdict:
+def c4(ideal: Mapping[float, Mapping[str, Point]],
+       torque_step: Mapping[float, Mapping[str, Measured]]) -> Verdict:
     """C4: T_max -> inf: PD-P&F shows stability problems on ground harder than the base.
 
-    ``ideal`` is a ground sweep at T_max = inf that includes 100 %; ``torque_step[c][scale]``
-    the largest tick-to-tick torque change (N m) of controller c at that ground scale.
+    ``ideal[scale][controller]`` are the points of a ground sweep at T_max = inf that
+    includes scale 1.0; ``torque_step[scale][controller]`` the largest tick-to-tick torque
+    change (N m) of that run.
     """
-    scales = ideal.values
-    k_base = int(np.argmin(np.abs(scales - 1.0)))
-    hard = scales > 1.0
-    err_pf = ideal.index("pd_pf", "eps_xH") + ideal.index("pd_pf", "eps_yH")
-    diverged = [f"{100 * s:.3g} %" for s, e in zip(scales[hard], err_pf[hard]) if np.isnan(e)]
-    growth = np.nanmax(err_pf[hard]) / err_pf[k_base] if np.any(~np.isnan(err_pf[hard])) \
-        else math.inf
-    steps = {s: torque_step["pd_pf"][s] / torque_step["pd_p"][s]
-             for s in torque_step["pd_pf"] if s > 1.0}
-    worst_step = max(steps.values()) if steps else 0.0
-    holds = bool(diverged) or growth >= C4_FACTOR or worst_step >= C4_FACTOR
-    ev = (f"PD-P&F diverged at {', '.join(diverged) or 'no ground'}; its hip errors on hard "
-          f"ground reach x{growth:.3g} the 100 % value; its largest torque step is "
-          + ", ".join(f"x{r:.3g} PD-P's at {100 * s:.3g} %" for s, r in sorted(steps.items())))
+    scales = sorted(ideal)
+    hard = [s for s in scales if s > 1.0]
+    base = ideal[min(scales, key=lambda s: abs(s - 1.0))]["pd_pf"]
+    err_base = total([base["eps_xH"], base["eps_yH"]])
+    signs: list[Tri] = []
+    diverged = [s for s in hard if ideal[s]["pd_pf"]["eps_xH"].diverged]
+    signs += [True if ideal[s]["pd_pf"]["eps_xH"].converged else None for s in diverged]
+    growth = {s: _ratio(total([ideal[s]["pd_pf"]["eps_xH"], ideal[s]["pd_pf"]["eps_yH"]]),
+                        err_base) for s in hard if s not in diverged}
+    steps = {s: _ratio(torque_step[s]["pd_pf"], torque_step[s]["pd_p"]) for s in hard
+             if s in torque_step}
+    signs += [at_least(g, C4_FACTOR) for g in growth.values()]
+    signs += [at_least(r, C4_FACTOR) for r in steps.values()]
+    ev = (f"PD-P&F diverged at {', '.join(f'{100 * s:.3g} %' for s in diverged) or 'no ground'}"
+          "; its hip errors on hard ground reach "
+          + ", ".join(f"x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items())
+          + " of the 100 % value; its largest torque step is "
+          + ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in steps.items()))
     return Verdict("C4", "T_max -> inf: PD-P&F shows stability problems (torque impulses at "
-                   "foot impacts, growing errors) on ground harder than the base", holds,
+                   "foot impacts, growing errors) on ground harder than the base",
+                   status_of(any3(signs)),
                    f"on ground > 100 % at T_max = inf, PD-P&F diverges, or its hip errors grow "
                    f">= {C4_FACTOR:g}x its 100 % value, or its largest tick-to-tick torque step "
-                   f"is >= {C4_FACTOR:g}x PD-P's", ev)
+                   f"is >= {C4_FACTOR:g}x PD-P's, over the whole dt-convergence band", ev)
 
 
-def _fmt(idx: Indices | None, name: str) -> str:
-    return "diverged" if idx is None else f"{getattr(idx, name):.4g}"
+def point(conv: Convergence) -> dict[str, Measured]:
+    """Every index of a checked case as :class:`Measured`."""
+    from .indices import REPORTED_NAMES
+
+    return {n: Measured.of(conv, n) for n in REPORTED_NAMES}
 
 
-__all__ = ["C3_FACTOR", "C4_FACTOR", "TRACKING", "Verdict", "c1", "c2", "c3", "c4"]
+__all__ = ["C3_FACTOR", "C4_FACTOR", "FAILS", "HOLDS", "Measured", "Point", "TRACKING",
+           "UNDECIDED", "Verdict", "all3", "any3", "at_least", "c1", "c2", "c3", "c4", "total",
+           "less", "point", "status_of"]

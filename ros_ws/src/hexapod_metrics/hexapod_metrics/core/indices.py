@@ -11,6 +11,11 @@ hexapod_sim.core.engine), so consecutive windows tile the run without overlap:
     F_L    = (1/L) sqrt(sum_i sum_k (f_ix^2 + f_iy^2) Delta t)       (10) N s^0.5 / m
     eps_xH = sum_i sqrt(mean_k (x_iHd - x_iH)^2), eps_yH, eps_xF, eps_yF alike (11a-d) (m)
 
+Beside eq. (11), not one of the paper's indices: lag_xH = mean_i mean_k (x_iHd - x_iH) (m), how
+far the hips trail the commanded x = V_F t on average. In a long run eps_xH keeps growing
+because the lag grows a little each cycle; the lag and its growth per cycle (the difference
+between consecutive cycles) tell that drift apart from the tracking within a cycle.
+
 [resolution, model.md] eq. (10) sums over j although its integrand has no j: we drop that
 sum. The paper's Fig. 9 calls F_L "P_L".
 """
@@ -26,13 +31,16 @@ from hexapod_sim.core.params import HexapodParams
 
 #: Index names in report order, with units.
 INDEX_NAMES = ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF")
+#: The seven, then the distance walked and the hip lag that every result also carries.
+REPORTED_NAMES = INDEX_NAMES + ("L", "lag_xH")
 INDEX_UNITS = {"E_av": "J/m", "T_L": "N m s^0.5/m", "F_L": "N s^0.5/m", "eps_xH": "m",
-               "eps_yH": "m", "eps_xF": "m", "eps_yF": "m", "L": "m"}
+               "eps_yH": "m", "eps_xF": "m", "eps_yF": "m", "L": "m", "lag_xH": "m"}
 
 
 @dataclass(frozen=True)
 class Indices:
-    """The seven indices of one window and the distance L they are normalised by."""
+    """The seven indices of one window, the distance L they are normalised by, and the mean
+    hip lag lag_xH (m; NaN where it was not recorded, e.g. in older bags)."""
 
     E_av: float
     T_L: float
@@ -42,6 +50,7 @@ class Indices:
     eps_xF: float
     eps_yF: float
     L: float
+    lag_xH: float = float("nan")
 
     def as_dict(self) -> dict[str, float]:
         """Name -> value, including L."""
@@ -54,7 +63,7 @@ class WindowSums:
 
     energy = sum |T theta_dot| dt; torque2 = sum T^2 dt; force2 = sum |f|^2 dt (all legs and
     joints); sq_err (4, 6) = per-leg sums of squared errors of x_H, y_H, x_F, y_F; samples =
-    N_S; distance = L.
+    N_S; distance = L; lag = sum of x_Hd - x_H over samples and legs.
     """
 
     energy: float
@@ -63,11 +72,13 @@ class WindowSums:
     sq_err: np.ndarray
     samples: int
     distance: float
+    lag: float = 0.0
 
     def __add__(self, other: "WindowSums") -> "WindowSums":
         return WindowSums(self.energy + other.energy, self.torque2 + other.torque2,
                           self.force2 + other.force2, self.sq_err + other.sq_err,
-                          self.samples + other.samples, self.distance + other.distance)
+                          self.samples + other.samples, self.distance + other.distance,
+                          self.lag + other.lag)
 
     def indices(self) -> Indices:
         """Eqs. (8)-(11) from the sums."""
@@ -75,7 +86,8 @@ class WindowSums:
         rms = np.sqrt(self.sq_err / self.samples).sum(axis=1)
         return Indices(self.energy / dist, float(np.sqrt(self.torque2)) / dist,
                        float(np.sqrt(self.force2)) / dist, float(rms[0]), float(rms[1]),
-                       float(rms[2]), float(rms[3]), dist)
+                       float(rms[2]), float(rms[3]), dist,
+                       self.lag / (self.samples * self.sq_err.shape[1]))
 
 
 def window_sums(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
@@ -91,7 +103,8 @@ def window_sums(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray
                    np.sum(err_f[..., 0] ** 2, axis=0), np.sum(err_f[..., 1] ** 2, axis=0)])
     return WindowSums(float(np.sum(np.abs(tq * w)) * dt), float(np.sum(tq * tq) * dt),
                       float(np.sum(f * f) * dt), sq, hip_pos.shape[0] - 1,
-                      float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0])))
+                      float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0])),
+                      float(np.sum(err_h[..., 0])))
 
 
 def compute_indices(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
@@ -130,5 +143,13 @@ def evaluation_window(p: HexapodParams, duration: float) -> tuple[float, float]:
     return t_b - p.run.eval_cycles * period, t_b
 
 
-__all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "WindowSums", "compute_indices",
-           "evaluation_window", "indices_from_obs", "sums_from_obs", "window_sums"]
+def lag_growth(previous: Indices | None, current: Indices | None) -> float:
+    """Growth of the hip lag from one gait cycle to the next (m per cycle; NaN if unknown)."""
+    if previous is None or current is None:
+        return float("nan")
+    return current.lag_xH - previous.lag_xH
+
+
+__all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "REPORTED_NAMES", "WindowSums",
+           "compute_indices", "evaluation_window", "indices_from_obs", "lag_growth",
+           "sums_from_obs", "window_sums"]

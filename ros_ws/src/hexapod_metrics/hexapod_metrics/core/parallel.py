@@ -12,7 +12,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterator, Protocol, Sequence
 
-from hexapod_control.core.closed_loop import Case
+from hexapod_control.core.closed_loop import Case, shared_reference_key
 
 from .simulate import Outcome, evaluate_batch
 
@@ -46,18 +46,41 @@ def _single_threaded_worker() -> None:
 
 
 class ProcessBackend:
-    """Local worker processes, one per core (each runs its chunk single-threaded)."""
+    """Local worker processes, one per core (each runs its chunk single-threaded).
+
+    The workers start on the first :meth:`map` and serve every later one (starting a worker
+    and loading the compiled engine costs seconds); :meth:`close` (or the end of a ``with``
+    block, or of the interpreter) stops them.
+    """
 
     def __init__(self, workers: int | None = None) -> None:
         self.workers = workers or os.cpu_count() or 1
+        self._pool: ProcessPoolExecutor | None = None
 
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
-        ctx = multiprocessing.get_context("spawn")  # no fork of numba's thread pool
-        with ProcessPoolExecutor(self.workers, mp_context=ctx,
-                                 initializer=_single_threaded_worker) as pool:
-            futures = [pool.submit(evaluate_chunk, c) for c in chunks]
+        if self._pool is None:
+            ctx = multiprocessing.get_context("spawn")  # no fork of numba's thread pool
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=ctx,
+                                             initializer=_single_threaded_worker)
+        futures = [self._pool.submit(evaluate_chunk, c) for c in chunks]
+        try:
             for fut in as_completed(futures):
                 yield fut.result()
+        finally:
+            for fut in futures:
+                fut.cancel()
+
+    def close(self) -> None:
+        """Stop the worker processes (idempotent)."""
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+    def __enter__(self) -> "ProcessBackend":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 class DaskBackend:
@@ -103,12 +126,11 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
     """Evaluate every case on ``backend``; results in the order of ``cases``.
 
     Cases are grouped into chunks that share a reference trajectory (same robot, gait and
-    timing). ``progress(n)`` is called with the number of cases finished in each chunk.
+    control period). ``progress(n)`` is called with the number of cases finished in each chunk.
     """
-    groups: dict[tuple, list[int]] = {}
+    groups: dict[tuple[object, ...], list[int]] = {}
     for k, c in enumerate(cases):
-        p = c.params
-        groups.setdefault((p.robot, p.gait, p.sim.dt, p.sim.control_period), []).append(k)
+        groups.setdefault(shared_reference_key(c.params), []).append(k)
     chunks: list[Chunk] = []
     order: list[list[int]] = []
     for members in groups.values():

@@ -17,7 +17,7 @@ from hexapod_sim.core.params import HexapodParams, from_flat
 
 from .bag_writer import BagWriter
 from .cdr import DiagnosticStatus
-from .indices import INDEX_NAMES, Indices, indices_from_obs
+from .indices import INDEX_NAMES, REPORTED_NAMES, Indices, indices_from_obs
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 PARAMS_KEY = "hexapod_params"
@@ -49,11 +49,12 @@ def params_from_custom_data(custom: dict[str, str] | None) -> HexapodParams | No
 
 
 def indices_status(idx: Indices, controller: str, cycle: int, t_a: float,
-                   t_b: float) -> DiagnosticStatus:
-    """One /hexapod/indices status: the seven indices of gait cycle ``cycle`` (and L)."""
-    values = tuple((n, repr(float(getattr(idx, n)))) for n in INDEX_NAMES + ("L",))
-    values += (("controller", controller), ("cycle", str(cycle)), ("t_a", repr(t_a)),
-               ("t_b", repr(t_b)))
+                   t_b: float, lag_growth: float = float("nan")) -> DiagnosticStatus:
+    """One /hexapod/indices status: the seven indices of gait cycle ``cycle``, L, the hip lag
+    and its growth since the previous cycle (m per cycle)."""
+    values = tuple((n, repr(float(getattr(idx, n)))) for n in REPORTED_NAMES)
+    values += (("lag_growth", repr(float(lag_growth))), ("controller", controller),
+               ("cycle", str(cycle)), ("t_a", repr(t_a)), ("t_b", repr(t_b)))
     return DiagnosticStatus(name=f"hexapod/indices/{controller}", message=f"cycle {cycle}",
                             hardware_id="hexapod", level=0, values=values)
 
@@ -61,7 +62,7 @@ def indices_status(idx: Indices, controller: str, cycle: int, t_a: float,
 def status_indices(status: DiagnosticStatus) -> tuple[Indices, dict[str, str]]:
     """Inverse of :func:`indices_status`: the indices and the other key/values."""
     kv = dict(status.values)
-    idx = Indices(**{n: float(kv.pop(n)) for n in INDEX_NAMES + ("L",)})
+    idx = Indices(**{n: float(kv.pop(n, "nan")) for n in REPORTED_NAMES})
     return idx, kv
 
 

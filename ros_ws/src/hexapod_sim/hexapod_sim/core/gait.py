@@ -15,8 +15,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
-from .kinematics import inverse_kinematics, joint_rates
+from .errors import UnreachableTargetError
+from .kinematics import ik_scalar, joint_rates
 from .params import N_LEGS, HexapodParams
 
 
@@ -48,66 +50,98 @@ def hip_offsets(p: HexapodParams) -> np.ndarray:
     return -(np.arange(N_LEGS) // 2) * p.robot.stroke_pitch
 
 
+@njit(cache=True, error_model="numpy")
+def _reference_kernel(t, phi, x0, period, t_t, t_s, velocity, step_length, clearance,  # type: ignore[no-untyped-def]
+                      body_height, foot_offset, l1, l2, joints, out, support):
+    """Eqs. (1)-(4) at every time of ``t`` (N,), legs 0..5, in one compiled pass.
+
+    out (N, 6, 6, 2) receives hip, hip_vel, foot, foot_vel, theta, theta_vel (the order of
+    :class:`Reference`); support (N, 6) the stance flags. With ``joints`` False the joint
+    references are left untouched (Cartesian only). Returns -1, or the first flat sample
+    index whose hip-foot distance leaves the annulus |L1-L2| <= r <= L1+L2.
+    """
+    two_pi = 2.0 * np.pi
+    r_max, r_min = l1 + l2, abs(l1 - l2)
+    for n in range(t.shape[0]):
+        for i in range(6):
+            ti = t[n] - phi[i] * period
+            k = np.floor(ti / period)
+            tau = ti - k * period
+            stance = tau >= t_t
+            hx = velocity * t[n] + x0[i]
+            if stance:
+                fx = (velocity * (phi[i] * period + k * period + t_t) + x0[i]
+                      + velocity * t_s / 2.0 + foot_offset)
+                fy, vx, vy = 0.0, 0.0, 0.0
+            else:
+                s = tau / t_t
+                a = two_pi * s
+                land_prev = (velocity * (phi[i] * period + (k - 1.0) * period + t_t) + x0[i]
+                             + velocity * t_s / 2.0 + foot_offset)
+                fx = land_prev + step_length * (s - np.sin(a) / two_pi)
+                fy = 0.5 * clearance * (1.0 - np.cos(a))
+                vx = step_length * (1.0 - np.cos(a)) / t_t
+                vy = 0.5 * clearance * np.sin(a) * two_pi / t_t
+            support[n, i] = stance
+            out[n, 0, i, 0], out[n, 0, i, 1] = hx, body_height
+            out[n, 1, i, 0], out[n, 1, i, 1] = velocity, 0.0
+            out[n, 2, i, 0], out[n, 2, i, 1] = fx, fy
+            out[n, 3, i, 0], out[n, 3, i, 1] = vx, vy
+            if joints:
+                px, py = hx - fx, body_height - fy
+                r2 = px * px + py * py
+                r = np.sqrt(r2)
+                if not (r_min <= r <= r_max):
+                    return n * 6 + i
+                th1, th2 = ik_scalar(px, py, r2, l1, l2)
+                w1, w2 = joint_rates(th1, th2, velocity - vx, -vy, l1, l2)
+                out[n, 4, i, 0], out[n, 4, i, 1] = th1, th2
+                out[n, 5, i, 0], out[n, 5, i, 1] = w1, w2
+    return -1
+
+
+def _reference_arrays(p: HexapodParams, t: np.ndarray, joints: bool
+                      ) -> tuple[np.ndarray, np.ndarray, int]:
+    g = p.gait
+    period = g.step_length / g.velocity
+    out = np.empty((t.shape[0], 6, N_LEGS, 2))
+    support = np.empty((t.shape[0], N_LEGS), dtype=np.bool_)
+    bad = _reference_kernel(t, phases(g.duty_factor), hip_offsets(p).astype(float), period,
+                            (1.0 - g.duty_factor) * period, g.duty_factor * period, g.velocity,
+                            g.step_length, g.foot_clearance, g.body_height,
+                            p.robot.foot_offset, p.robot.leg_length_1, p.robot.leg_length_2,
+                            joints, out, support)
+    return out, support, bad
+
+
 def cartesian_reference(p: HexapodParams, t: np.ndarray) -> tuple[np.ndarray, ...]:
     """Hip and foot desired positions and velocities at times t (paper eqs. 1-3).
 
     Returns (hip, hip_vel, foot, foot_vel, support) with shapes (N, 6, 2) and (N, 6).
     """
-    g = p.gait
-    t = np.asarray(t, dtype=float).reshape(-1, 1)
-    period = g.step_length / g.velocity
-    t_t = (1.0 - g.duty_factor) * period
-    t_s = g.duty_factor * period
-    phi = phases(g.duty_factor)[None, :]
-    x0 = hip_offsets(p)[None, :]
-
-    ti = t - phi * period
-    k = np.floor(ti / period)
-    tau = ti - k * period
-    support = tau >= t_t
-
-    def x_land(cycle: np.ndarray) -> np.ndarray:
-        return (g.velocity * (phi * period + cycle * period + t_t) + x0
-                + g.velocity * t_s / 2.0 + p.robot.foot_offset)
-
-    s = np.where(support, 0.0, tau / t_t)
-    two_pi_s = 2.0 * np.pi * s
-    x_tr = x_land(k - 1) + g.step_length * (s - np.sin(two_pi_s) / (2.0 * np.pi))
-    y_tr = 0.5 * g.foot_clearance * (1.0 - np.cos(two_pi_s))
-    vx_tr = g.step_length * (1.0 - np.cos(two_pi_s)) / t_t
-    vy_tr = 0.5 * g.foot_clearance * np.sin(two_pi_s) * 2.0 * np.pi / t_t
-
-    n = t.shape[0]
-    foot = np.empty((n, N_LEGS, 2))
-    foot_vel = np.empty((n, N_LEGS, 2))
-    foot[..., 0] = np.where(support, x_land(k), x_tr)
-    foot[..., 1] = np.where(support, 0.0, y_tr)
-    foot_vel[..., 0] = np.where(support, 0.0, vx_tr)
-    foot_vel[..., 1] = np.where(support, 0.0, vy_tr)
-
-    hip = np.empty((n, N_LEGS, 2))
-    hip[..., 0] = g.velocity * t + x0
-    hip[..., 1] = g.body_height
-    hip_vel = np.zeros((n, N_LEGS, 2))
-    hip_vel[..., 0] = g.velocity
-    return hip, hip_vel, foot, foot_vel, support
+    t = np.ascontiguousarray(np.asarray(t, dtype=float).reshape(-1))
+    out, support, _ = _reference_arrays(p, t, False)
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 3], support
 
 
 def reference(p: HexapodParams, t: np.ndarray | float) -> Reference:
     """Full reference at times t: Cartesian (eqs. 1-3) and joint (eqs. 4a-4c).
 
-    Raises :class:`~.errors.UnreachableTargetError` if the gait leaves the leg's reach.
+    One compiled pass over all samples (the in-process loop asks for a whole run or block
+    at once; the trajectory node for a block of ticks). Raises
+    :class:`~.errors.UnreachableTargetError` if the gait leaves the leg's reach.
     """
-    t = np.atleast_1d(np.asarray(t, dtype=float))
-    hip, hip_vel, foot, foot_vel, support = cartesian_reference(p, t)
-    l1, l2 = p.robot.leg_length_1, p.robot.leg_length_2
-    rel = hip - foot
-    rel_vel = hip_vel - foot_vel
-    th1, th2 = inverse_kinematics(rel[..., 0], rel[..., 1], l1, l2)
-    w1, w2 = joint_rates(th1, th2, rel_vel[..., 0], rel_vel[..., 1], l1, l2)
-    theta = np.stack([th1, th2], axis=-1)
-    theta_vel = np.stack([w1, w2], axis=-1)
-    return Reference(t, hip, hip_vel, foot, foot_vel, theta, theta_vel, support)
+    t = np.ascontiguousarray(np.atleast_1d(np.asarray(t, dtype=float)).reshape(-1))
+    out, support, bad = _reference_arrays(p, t, True)
+    if bad >= 0:
+        n, i = divmod(bad, N_LEGS)
+        rel = out[n, 0, i] - out[n, 2, i]
+        raise UnreachableTargetError(
+            f"IK target |p| = {float(np.hypot(*rel)):.6g} m outside the leg's reach "
+            f"[{abs(p.robot.leg_length_1 - p.robot.leg_length_2):.6g}, "
+            f"{p.robot.leg_length_1 + p.robot.leg_length_2:.6g}] m")
+    return Reference(t, out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5],
+                     support)
 
 
 def reach_bounds(p: HexapodParams, samples: int = 2001) -> tuple[float, float]:

@@ -78,6 +78,20 @@ def foot_force_torque(th1, th2, fx, fy, l1, l2):  # type: ignore[no-untyped-def]
     return -(j11 * fx + j21 * fy), -(j12 * fx + j22 * fy)
 
 
+@njit(cache=True, error_model="numpy")
+def ik_scalar(px, py, r2, l1, l2):  # type: ignore[no-untyped-def]
+    """theta = Psi^-1(p) of one reachable target p = p_H - p_F with r2 = |p|^2 (forward knee).
+
+    The caller checks the reach; this is the formula shared by :func:`inverse_kinematics`
+    and the compiled reference of the gait.
+    """
+    # Foot relative to hip, measured in a frame whose first axis points down.
+    c2 = min(1.0, max(-1.0, (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)))
+    th2 = -np.arccos(c2)
+    th1 = np.arctan2(-px, py) - np.arctan2(l2 * np.sin(th2), l1 + l2 * np.cos(th2))
+    return th1, th2
+
+
 def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float,
                        l2: float) -> tuple[np.ndarray, np.ndarray]:
     """theta = Psi^-1(p) for p = p_H - p_F, forward knee (theta2 < 0), paper eq. (4b).
@@ -95,14 +109,13 @@ def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float
         raise UnreachableTargetError(
             f"IK target |p| = {np.ravel(r)[k]:.6g} m outside the leg's reach "
             f"[{abs(l1 - l2):.6g}, {l1 + l2:.6g}] m")
-    # Foot relative to hip, measured in a frame whose first axis points down.
-    down, fwd = py, -px
-    c2 = np.clip((r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2), -1.0, 1.0)
-    th2 = -np.arccos(c2)
-    th1 = np.arctan2(fwd, down) - np.arctan2(l2 * np.sin(th2), l1 + l2 * np.cos(th2))
-    return th1, th2
+    th1 = np.empty(np.shape(r2))
+    th2 = np.empty(np.shape(r2))
+    for k, (x, y, rr) in enumerate(zip(px.flat, py.flat, r2.flat)):
+        th1.flat[k], th2.flat[k] = ik_scalar(float(x), float(y), float(rr), l1, l2)
+    return (th1[()], th2[()]) if th1.ndim == 0 else (th1, th2)
 
 
 __all__ = ["foot_force_torque", "foot_offset", "foot_offset_cs", "foot_velocity_cs",
-           "inverse_kinematics", "joint_rates",
+           "ik_scalar", "inverse_kinematics", "joint_rates",
            "knee_offset", "psi", "psi_jacobian"]
