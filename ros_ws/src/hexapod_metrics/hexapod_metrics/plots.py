@@ -194,7 +194,7 @@ def advantage_map(rates: Sequence[float], percents: Sequence[float],
     ax.legend(handles=[Patch(color="tab:red", label="PD-P&F below PD-P (all 4 errors)"),
                        Patch(color="tab:blue", label="PD-P below on some error"),
                        Patch(color="lightgrey", label="undecided (within bands)"),
-                       Patch(fill=False, hatch="///", label="a number not dt-converged")],
+                       Patch(fill=False, hatch="///", label="a deciding number not dt-converged")],
               fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path)

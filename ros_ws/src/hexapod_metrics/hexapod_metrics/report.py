@@ -131,8 +131,14 @@ def _sweep_points(res: SweepResult) -> dict[str, list[dict[str, Measured]]]:
     return {c: [claims.point(cv) for cv in res.convergence[c]] for c in res.outcomes}
 
 
-def _advantage(pf: Mapping[str, Measured], pp: Mapping[str, Measured]) -> str:
-    t = claims.all3(claims.less(pf[n], pp[n]) for n in claims.TRACKING)
+#: The indices that decide a claim (C1-C4 use tracking errors, T_L and torque steps; E_av
+#: is reported beside T_L). F_L, the sampled hip force, decides none.
+DECIDING = ("E_av", "T_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF")
+
+
+def _better(pf: Mapping[str, Measured], pp: Mapping[str, Measured], names: Sequence[str]
+            ) -> str:
+    t = claims.all3(claims.less(pf[n], pp[n]) for n in names)
     return "undecided" if t is None else ("pd_pf better" if t else "pd_p better")
 
 
@@ -148,29 +154,49 @@ def _lowest_rate_from(rates: Sequence[float], ok: Mapping[float, bool]) -> float
 
 @dataclass(frozen=True)
 class RateFindings:
-    """What E6 says: cells of the (rate, ground) maps and the two threshold rates."""
+    """What E6 says: per T_max and (rate, ground %) cell, who tracks better (all four
+    errors, and the two hip errors alone) and whether the numbers converged; and the lowest
+    rates from which each holds everywhere (None: not even at the highest rate)."""
 
-    cells: dict[float, dict[tuple[float, float], str]]        # t_max -> (rate, pct) -> status
-    converged: dict[float, dict[tuple[float, float], bool]]   # t_max -> (rate, pct) -> both
-    advantage_rate: float | None   # lowest rate from which PD-P&F wins everywhere (decided)
-    converged_rate: float | None   # lowest rate from which every point is dt-converged
+    cells: dict[float, dict[tuple[float, float], str]]
+    hip_cells: dict[float, dict[tuple[float, float], str]]
+    converged: dict[float, dict[tuple[float, float], bool]]        # all seven indices
+    converged_deciding: dict[float, dict[tuple[float, float], bool]]  # DECIDING only
+    advantage_rate: float | None
+    hip_advantage_rate: float | None
+    converged_rate: float | None
+    deciding_converged_rate: float | None
 
 
 def rate_findings(e6: RateResult) -> RateFindings:
-    """Judge every E6 point (C2's criterion: all four tracking errors, decided)."""
-    cells: dict[float, dict[tuple[float, float], str]] = {t: {} for t in e6.t_max_values}
-    conv: dict[float, dict[tuple[float, float], bool]] = {t: {} for t in e6.t_max_values}
+    """Judge every E6 point with C2's criterion (decided comparisons of tracking errors)."""
+    ts = e6.t_max_values
+    cells: dict[float, dict[tuple[float, float], str]] = {t: {} for t in ts}
+    hip: dict[float, dict[tuple[float, float], str]] = {t: {} for t in ts}
+    conv: dict[float, dict[tuple[float, float], bool]] = {t: {} for t in ts}
+    conv_d: dict[float, dict[tuple[float, float], bool]] = {t: {} for t in ts}
     for (rate, t_max), res in e6.sweeps.items():
+        assert res.convergence is not None
         pts = _sweep_points(res)
         for k, pct in enumerate(e6.percents):
-            cells[t_max][(rate, pct)] = _advantage(pts["pd_pf"][k], pts["pd_p"][k])
-            conv[t_max][(rate, pct)] = all(bool(res.converged(c)[k]) for c in res.outcomes)
-    wins = {r: all(cells[t][(r, g)] == "pd_pf better" for t in e6.t_max_values
-                   for g in e6.percents) for r in e6.rates}
-    allconv = {r: all(conv[t][(r, g)] for t in e6.t_max_values for g in e6.percents)
-               for r in e6.rates}
-    return RateFindings(cells, conv, _lowest_rate_from(e6.rates, wins),
-                        _lowest_rate_from(e6.rates, allconv))
+            key = (rate, pct)
+            cells[t_max][key] = _better(pts["pd_pf"][k], pts["pd_p"][k], claims.TRACKING)
+            hip[t_max][key] = _better(pts["pd_pf"][k], pts["pd_p"][k], ("eps_xH", "eps_yH"))
+            cvs = [res.convergence[c][k] for c in res.outcomes]
+            conv[t_max][key] = all(cv.converged for cv in cvs)
+            skip = [n for n in INDEX_NAMES if n not in DECIDING]
+            conv_d[t_max][key] = all(cv.converged_except(skip) for cv in cvs)
+
+    def everywhere(table: Mapping[float, Mapping[tuple[float, float], object]],
+                   want: object) -> dict[float, bool]:
+        return {r: all(table[t][(r, g)] == want for t in ts for g in e6.percents)
+                for r in e6.rates}
+
+    return RateFindings(cells, hip, conv, conv_d,
+                        _lowest_rate_from(e6.rates, everywhere(cells, "pd_pf better")),
+                        _lowest_rate_from(e6.rates, everywhere(hip, "pd_pf better")),
+                        _lowest_rate_from(e6.rates, everywhere(conv, True)),
+                        _lowest_rate_from(e6.rates, everywhere(conv_d, True)))
 
 
 def _hz(rate: float | None) -> str:
@@ -187,39 +213,60 @@ def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float) -
           "run at dt, dt/2 and dt/4 with the same control period. A cell is *PD-P&F better* "
           "when all four of its tracking errors are below PD-P's by more than both "
           "controllers' convergence bands, *PD-P better* when one of them is above by more "
-          "than the bands, else *undecided*.", ""]
+          "than the bands, else *undecided*; the hip columns judge eps_xH and eps_yH alone. "
+          "*Converged* counts points whose seven indices all converged; the deciding "
+          "indices leave out F_L (the hip force sampled at the control ticks, which no "
+          "claim uses).", ""]
     n_pts = len(e6.percents) * len(e6.t_max_values)
-    md += ["| rate | PD-P&F better | PD-P better | undecided | points not dt-converged |",
-           "|---|---|---|---|---|"]
+    md += ["| rate | PD-P&F better | PD-P better | undecided | hip errors: PD-P&F better | "
+           "points converged (all 7) | points converged (deciding indices) |",
+           "|---|---|---|---|---|---|---|"]
+    keys = [(t, g) for t in e6.t_max_values for g in e6.percents]
     for r in e6.rates:
-        cs = [f.cells[t][(r, g)] for t in e6.t_max_values for g in e6.percents]
-        nc = sum(not f.converged[t][(r, g)] for t in e6.t_max_values for g in e6.percents)
+        cs = [f.cells[t][(r, g)] for t, g in keys]
+        hs = [f.hip_cells[t][(r, g)] for t, g in keys]
+        nc = sum(f.converged[t][(r, g)] for t, g in keys)
+        nd = sum(f.converged_deciding[t][(r, g)] for t, g in keys)
         md.append(f"| {_hz(r)} | {cs.count('pd_pf better')}/{n_pts} | "
                   f"{cs.count('pd_p better')}/{n_pts} | {cs.count('undecided')}/{n_pts} | "
-                  f"{nc}/{n_pts} |")
-    md += ["", f"**Answer.** PD-P&F's advantage holds over the whole ground range "
-           f"({e6.percents[0]:g}-{e6.percents[-1]:g} %, T_max "
-           f"{' and '.join(f'{t:g}' for t in e6.t_max_values)}) from "
-           f"**{_hz(f.advantage_rate)}** on; every point is dt-converged from "
-           f"**{_hz(f.converged_rate)}** on."]
-    below = [r for r in e6.rates if f.advantage_rate is None or r < f.advantage_rate]
+                  f"{hs.count('pd_pf better')}/{n_pts} | {nc}/{n_pts} | {nd}/{n_pts} |")
+    rng = (f"{e6.percents[0]:g}-{e6.percents[-1]:g} %, T_max "
+           f"{' and '.join(f'{t:g}' for t in e6.t_max_values)} N m")
+    md += ["", f"**Answer.** Over the whole ground range ({rng}), PD-P&F's hip errors are "
+           f"below PD-P's, decided, from **{_hz(f.hip_advantage_rate)}** on; all four of its "
+           f"tracking errors from **{_hz(f.advantage_rate)}** on. Every deciding index is "
+           f"dt-converged at every point from **{_hz(f.deciding_converged_rate)}** on, all "
+           f"seven indices from **{_hz(f.converged_rate)}** on."]
+    below = [r for r in e6.rates
+             if f.hip_advantage_rate is None or r < f.hip_advantage_rate]
     for r in below:
-        lost = [f"{g:g} % (T_max {t:g}: {f.cells[t][(r, g)]}"
-                + ("" if f.converged[t][(r, g)] else ", not converged") + ")"
-                for t in e6.t_max_values for g in e6.percents
-                if f.cells[t][(r, g)] != "pd_pf better"]
-        md.append(f"- At {_hz(r)}: not better at {len(lost)} of {n_pts} points: "
-                  + "; ".join(lost) + ".")
+        lost = [f"{g:g} % at T_max {t:g} ({f.hip_cells[t][(r, g)]}"
+                + ("" if f.converged_deciding[t][(r, g)] else ", not converged") + ")"
+                for t, g in keys if f.hip_cells[t][(r, g)] != "pd_pf better"]
+        md.append(f"- At {_hz(r)} PD-P&F's hip errors are not decidedly below PD-P's at "
+                  f"{len(lost)} of {n_pts} points: " + "; ".join(lost) + ".")
+    foot = [f"{g:g} % at T_max {t:g}" for t, g in keys
+            if (paper_rate, g) in f.cells[t] and f.cells[t][(paper_rate, g)] == "pd_p better"
+            and f.hip_cells[t][(paper_rate, g)] == "pd_pf better"]
+    if foot:
+        md.append(f"- At {_hz(paper_rate)} PD-P&F's hip errors win everywhere, yet PD-P "
+                  f"tracks at least one foot coordinate better at: {', '.join(foot)}.")
     md += ["", f"The experiments E1-E5 below run at **{_hz(paper_rate)}** "
-           "(`sim.control_period` of the params file)."]
-    if f.converged_rate is not None and paper_rate < f.converged_rate:
-        md.append(f"That is BELOW the {_hz(f.converged_rate)} from which E6 finds every "
-                  "point converged: expect undecided numbers.")
+           "(`sim.control_period` of the params file)"]
+    if f.deciding_converged_rate is not None and paper_rate >= f.deciding_converged_rate:
+        md[-1] += (f", which is at or above the {_hz(f.deciding_converged_rate)} from which "
+                   "E6 finds every deciding number dt-converged: the model's numbers there no "
+                   "longer depend on the step size, as a continuous-time controller's would "
+                   "not.")
+    else:
+        md[-1] += (": BELOW the rate from which E6 finds every deciding number "
+                   f"dt-converged ({_hz(f.deciding_converged_rate)}): expect undecided "
+                   "numbers.")
     md.append("")
     for t in e6.t_max_values:
         fname = f"fig_e6_map_tmax{t:g}.png"
-        plots.advantage_map(e6.rates, e6.percents, f.cells[t], f.converged[t], out / fname,
-                            f"E6: who tracks better, T_max = {t:g} N m")
+        plots.advantage_map(e6.rates, e6.percents, f.cells[t], f.converged_deciding[t],
+                            out / fname, f"E6: who tracks better, T_max = {t:g} N m")
         md.append(f"![{fname}]({fname})")
     md.append("")
     for t in e6.t_max_values:
@@ -234,16 +281,16 @@ def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float) -
 
 
 def _why(v: claims.Verdict) -> str:
-    """Why a verdict came out as it did, from the numbers in its evidence."""
+    """Why a verdict came out as it did: the comparisons that decided it."""
     if v.status == claims.UNDECIDED:
-        return (f"**{v.claim} is undecided**: no deciding comparison fails, but at least one "
-                "is not decided: a number moves by 1 % or more from dt/2 to dt/4, or the "
-                "margin lies within the two convergence bands (see 'undecided' in its "
-                "numbers).")
+        return (f"**{v.claim} is undecided.** Nothing decided goes against it, but these "
+                "comparisons are not decided (a number moves by 1 % or more from dt/2 to "
+                "dt/4, or the margin lies within the convergence bands): "
+                + "; ".join(v.open) + ".")
     if v.status == claims.FAILS:
-        return (f"**{v.claim} fails**: at least one deciding comparison goes against the "
-                "claim by more than the convergence bands, at converged points (listed in "
-                "its numbers).")
+        return (f"**{v.claim} fails.** Decided against it, at dt-converged numbers and by "
+                "more than their bands: " + "; ".join(v.against) + "."
+                + (f" Undecided besides: {'; '.join(v.open)}." if v.open else ""))
     return ""
 
 
@@ -460,7 +507,9 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     doc = {"control_rate_hz": rate, "dt": p.sim.dt,
            "claims": [{**v.__dict__} for v in verdicts],
            "e6": {"advantage_rate_hz": findings.advantage_rate,
+                  "hip_advantage_rate_hz": findings.hip_advantage_rate,
                   "converged_rate_hz": findings.converged_rate,
+                  "deciding_converged_rate_hz": findings.deciding_converged_rate,
                   "cells": {f"tmax{t:g}": {f"{r:g}Hz,{g:g}%": s for (r, g), s in cells.items()}
                             for t, cells in findings.cells.items()}},
            "base": {c: conv_doc(cv) for c, cv in base_conv.items()},

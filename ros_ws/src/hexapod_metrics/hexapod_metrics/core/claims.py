@@ -130,6 +130,9 @@ class Verdict:
     status: str
     rule: str
     evidence: str
+    #: the comparisons decided against the claim, and those left undecided
+    against: tuple[str, ...] = ()
+    open: tuple[str, ...] = ()
 
     @property
     def holds(self) -> bool:
@@ -163,7 +166,13 @@ def c1(pd_p: Point, pd_pf: Point) -> Verdict:
     return Verdict("C1", "Base, T_max 400: PD-P&F tracks hip and foot better than PD-P and "
                    "needs less joint torque", status_of(all3(cmp.values())),
                    "all four tracking errors and T_L of PD-P&F below PD-P's, each margin "
-                   "beyond both dt-convergence bands", "PD-P&F vs PD-P: " + ev)
+                   "beyond both dt-convergence bands", "PD-P&F vs PD-P: " + ev,
+                   _listed(cmp, False, pd_pf, pd_p), _listed(cmp, None, pd_pf, pd_p))
+
+
+def _listed(cmp: Mapping[str, Tri], want: Tri, a: Point, b: Point) -> tuple[str, ...]:
+    return tuple(f"{n}: PD-P&F {a[n].text()} vs PD-P {b[n].text()}" for n, r in cmp.items()
+                 if r is want)
 
 
 def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[float]
@@ -173,10 +182,17 @@ def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[f
     ``sweeps[t_max][controller][k]`` is the point at ground ``values[k]`` (a scale).
     """
     parts, results = [], []
+    against: list[str] = []
+    undecided: list[str] = []
     for t_max, by_c in sweeps.items():
         for n in TRACKING:
             cmp = [less(a[n], b[n]) for a, b in zip(by_c["pd_pf"], by_c["pd_p"])]
             results += cmp
+            for v, r, a, b in zip(values, cmp, by_c["pd_pf"], by_c["pd_p"]):
+                if r is not True:
+                    (against if r is False else undecided).append(
+                        f"{n} at {100 * v:.3g} %, T_max {t_max:g}: PD-P&F {a[n].text()} vs "
+                        f"PD-P {b[n].text()}")
             lose = [f"{100 * v:.3g} %" for v, r in zip(values, cmp) if r is False]
             open_ = [f"{100 * v:.3g} %" for v, r in zip(values, cmp) if r is None]
             text = f"T_max {t_max:g}, {n}: below at {sum(r is True for r in cmp)}/{len(cmp)}"
@@ -188,7 +204,8 @@ def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[f
     return Verdict("C2", "Ground sweep at T_max 400 and 170: PD-P&F's hip and foot errors "
                    "stay below PD-P's over the whole range", status_of(all3(results)),
                    "every tracking error of PD-P&F below PD-P's at every ground percentage, "
-                   "each margin beyond both dt-convergence bands", "; ".join(parts))
+                   "each margin beyond both dt-convergence bands", "; ".join(parts),
+                   tuple(against), tuple(undecided))
 
 
 def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float) -> Verdict:
@@ -203,7 +220,9 @@ def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float) -> 
                    status_of(all3(cmp.values())),
                    f"at T_max {t_max:g} the summed tracking errors are >= {C3_FACTOR:g}x "
                    "their T_max 400 value for both controllers (or the run diverges), over "
-                   "the whole dt-convergence band", ev)
+                   "the whole dt-convergence band", ev,
+                   tuple(f"{c}: x{ratios[c].text(3)}" for c, r in cmp.items() if r is False),
+                   tuple(f"{c}: x{ratios[c].text(3)}" for c, r in cmp.items() if r is None))
 
 
 def c4(ideal: Mapping[float, Mapping[str, Point]],
@@ -227,6 +246,10 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
              if s in torque_step}
     signs += [at_least(g, C4_FACTOR) for g in growth.values()]
     signs += [at_least(r, C4_FACTOR) for r in steps.values()]
+    named = ([f"divergence at {100 * s:.3g} %" for s in diverged]
+             + [f"hip error growth x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items()]
+             + [f"torque step x{r.text(3)} PD-P's at {100 * s:.3g} %"
+                for s, r in steps.items()])
     ev = (f"PD-P&F diverged at {', '.join(f'{100 * s:.3g} %' for s in diverged) or 'no ground'}"
           "; its hip errors on hard ground reach "
           + ", ".join(f"x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items())
@@ -237,7 +260,9 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
                    status_of(any3(signs)),
                    f"on ground > 100 % at T_max = inf, PD-P&F diverges, or its hip errors grow "
                    f">= {C4_FACTOR:g}x its 100 % value, or its largest tick-to-tick torque step "
-                   f"is >= {C4_FACTOR:g}x PD-P's, over the whole dt-convergence band", ev)
+                   f"is >= {C4_FACTOR:g}x PD-P's, over the whole dt-convergence band", ev,
+                   tuple(n for n, t in zip(named, signs) if t is False),
+                   tuple(n for n, t in zip(named, signs) if t is None))
 
 
 def point(conv: Convergence) -> dict[str, Measured]:

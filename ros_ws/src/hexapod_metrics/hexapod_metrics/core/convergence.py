@@ -27,6 +27,8 @@ REL_TOL = 0.01
 #: Tracking errors may instead move by less than this (m).
 ABS_TOL_TRACKING = 1e-3
 TRACKING = ("eps_xH", "eps_yH", "eps_xF", "eps_yF")
+#: Lengths in m that share the tracking errors' 1 mm floor (the hip lag beside eq. 11).
+LENGTHS = TRACKING + ("lag_xH",)
 
 
 def refined(p: HexapodParams, factor: int) -> HexapodParams:
@@ -37,7 +39,7 @@ def refined(p: HexapodParams, factor: int) -> HexapodParams:
 def tolerance(name: str, value: float) -> float:
     """How far index ``name`` of magnitude ``value`` may move and still count as converged."""
     tol = REL_TOL * abs(value)
-    return max(tol, ABS_TOL_TRACKING) if name in TRACKING else tol
+    return max(tol, ABS_TOL_TRACKING) if name in LENGTHS else tol
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,10 @@ class Convergence:
         """Every one of the seven indices converged (and no run diverged)."""
         return all(self.index_converged(n) for n in INDEX_NAMES)
 
+    def converged_except(self, skip: Sequence[str]) -> bool:
+        """Every index but those of ``skip`` converged."""
+        return all(self.index_converged(n) for n in INDEX_NAMES if n not in skip)
+
     def unconverged(self) -> list[str]:
         """Names of the indices that did not converge."""
         return [n for n in INDEX_NAMES if not self.index_converged(n)]
@@ -115,5 +121,5 @@ def check_cases(cases: Sequence[Case], duration: float, backend: Backend | None 
     return [Convergence(tuple(outs[i * k:(i + 1) * k])) for i in range(len(cases))]
 
 
-__all__ = ["ABS_TOL_TRACKING", "Convergence", "REFINEMENTS", "REL_TOL", "TRACKING",
+__all__ = ["ABS_TOL_TRACKING", "Convergence", "LENGTHS", "REFINEMENTS", "REL_TOL", "TRACKING",
            "check_cases", "refined", "tolerance"]
