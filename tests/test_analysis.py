@@ -18,16 +18,19 @@ from hexapod_metrics.core.recording import write_run_bag
 from hexapod_metrics.core.simulate import simulate
 from hexapod_sim.core.params import load_params
 
+#: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
+FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
+
 
 @pytest.fixture(scope="module")
 def switched_bag(tmp_path_factory):
-    p = load_params()
+    p = load_params(**FAST)
     r = run(p, "pd_pf", 4.0, switches=[(2.0, "pd_p")])
     return write_run_bag(r, tmp_path_factory.mktemp("bags") / "switched"), r
 
 
 def test_analysis_equals_engine_and_online_indices(tmp_path):
-    p = load_params()
+    p = load_params(**FAST)
     sim = simulate(p, "pd_pf")
     bag = write_run_bag(sim.run, tmp_path / "bag")
     a = analyze_bag(bag)
@@ -94,7 +97,7 @@ def _timeout(signum, frame):
 
 
 def test_fuzz_mutated_and_truncated_bags(tmp_path):
-    p = load_params()
+    p = load_params(**FAST)
     small = write_run_bag(run(p, "pd_pf", 1.0), tmp_path / "small")
     data = next(Path(small).glob("*.mcap")).read_bytes()
     rng = np.random.default_rng(11)

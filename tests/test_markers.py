@@ -17,7 +17,9 @@ def test_markers_of_a_run_round_trip_through_a_bag(tmp_path):
     from hexapod_metrics.marker_node import markers
     from hexapod_sim.core.params import load_params
 
-    r = run(load_params(), "pd_pf", 1.0)
+    FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}  # 1 kHz: a small run
+
+    r = run(load_params(**FAST), "pd_pf", 1.0)
     k = 700  # legs 2, 3, 6 in stance
     msg = markers(r.obs[k], 1.0, k * 1_000_000)
     fig = stick_figure(r.obs[k], 1.0)

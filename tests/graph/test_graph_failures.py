@@ -13,7 +13,7 @@ from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import default_params_path, load_params
 
-from .conftest import call, hexapod_cli, ros_client, sim_summary
+from .conftest import call, fast_params, hexapod_cli, ros_client, sim_summary
 
 
 def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_graph):
@@ -159,6 +159,6 @@ def test_two_graphs_on_two_domain_ids_do_not_see_each_other(make_graph, tmp_path
     n = len(js.stamps) - 1
     assert n > 100 and np.array_equal(js.stamps, np.arange(n + 1) * 1_000_000)
     assert np.array_equal(np.unique(cmd.stamps), cmd.stamps)
-    expected = run(load_params(), "pd_pf", n * 0.001)
+    expected = run(fast_params(), "pd_pf", n * 0.001)
     np.testing.assert_allclose(js.position.reshape(-1, 6, 2), expected.obs[:, 0], atol=1e-9,
                                rtol=0)

@@ -17,14 +17,14 @@ from hexapod_sim.core.params import load_params
 from .conftest import sim_summary
 
 DURATION = 3.0
-PERIOD = 0.001  # 1 kHz: three full gait cycles in a few seconds of wall time
+PERIOD = 0.001  # 1 kHz at 1e-4 s physics (conftest.FAST_TIMING): three cycles, seconds of wall time
 NODES = "trajectory_generator,pd_pf_controller,metrics"
 
 
 def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make_graph,
                                                                              tmp_path):
     bag = tmp_path / "bag"
-    g = make_graph(overrides=(f"sim.control_period:={PERIOD}",))
+    g = make_graph()
     g.start("metrics", f"bag_path:={bag}")
     g.start("trajectory_generator")
     g.start("pd_pf_controller")
@@ -35,7 +35,7 @@ def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make
     g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
     assert summary["missed"] == 0 and summary["late"] == 0
 
-    p = load_params(**{"sim.control_period": PERIOD})
+    p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD})
     ref = run(p, "pd_pf", DURATION)
     n = ref.obs.shape[0]  # ticks 0..N
     with open_bag(bag) as b:

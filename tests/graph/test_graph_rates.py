@@ -12,13 +12,14 @@ from hexapod_sim.core.params import load_params
 from .conftest import sim_summary
 
 DURATION = 1.0
-PERIOD = 1e-4  # 10 kHz
+PERIOD = 1e-4  # 10 kHz, the paper experiments' rate
+DT = 5e-5      # and their physics step (the params file's defaults)
 NODES = "trajectory_generator,pd_pf_controller,metrics"
 
 
 def test_lockstep_graph_equals_the_engine_at_10_khz_control(make_graph, tmp_path):
     bag = tmp_path / "bag"
-    g = make_graph(overrides=(f"sim.control_period:={PERIOD}",))
+    g = make_graph(overrides=(f"sim.dt:={DT}", f"sim.control_period:={PERIOD}"))
     g.start("metrics", f"bag_path:={bag}")
     g.start("trajectory_generator")
     g.start("pd_pf_controller")
@@ -29,8 +30,8 @@ def test_lockstep_graph_equals_the_engine_at_10_khz_control(make_graph, tmp_path
     g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
     assert summary["missed"] == 0 and summary["late"] == 0
 
-    p = load_params(**{"sim.control_period": PERIOD})
-    assert p.substeps == 1
+    p = load_params(**{"sim.dt": DT, "sim.control_period": PERIOD})
+    assert p.substeps == 2
     ref = run(p, "pd_pf", DURATION)
     n = ref.obs.shape[0]
     assert n == 10001
