@@ -85,3 +85,27 @@ def test_window_sums_add_up_over_consecutive_windows():
     joined = (parts[0] + parts[1]).indices()
     for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF", "L"):
         assert getattr(joined, name) == pytest.approx(getattr(whole, name), rel=1e-12)
+
+
+def test_hip_lag_and_its_growth_tell_drift_from_tracking():
+    """A hip that trails its reference by a growing amount: eps_xH grows with the lag, the
+    lag itself is the mean trailing distance, and its growth per cycle is the drift."""
+    from hexapod_metrics.core.indices import lag_growth, window_sums
+
+    n, dt = 1000, 1e-3
+    t, hip_ref = _window(n, dt)
+    zeros = np.zeros((n + 1, 6, 2))
+    cycles = []
+    for c in range(3):
+        hip = hip_ref.copy()
+        hip[..., 0] -= 0.01 * (c + 1)          # cycle c trails by (c+1) cm, on every leg
+        hip[:, 3, 0] -= 0.006                  # leg 4 trails 6 mm more
+        cycles.append(window_sums(zeros, zeros, zeros, hip, hip_ref, zeros, zeros, dt))
+    idx = [s.indices() for s in cycles]
+    assert idx[0].lag_xH == pytest.approx(0.011)          # (6 x 1 cm + 6 mm) / 6
+    assert idx[0].eps_xH == pytest.approx(5 * 0.01 + 0.016)
+    assert lag_growth(idx[0], idx[1]) == pytest.approx(0.01)
+    assert lag_growth(idx[1], idx[2]) == pytest.approx(0.01)
+    assert np.isnan(lag_growth(None, idx[0]))
+    both = (cycles[0] + cycles[1]).indices()               # sums add over windows
+    assert both.lag_xH == pytest.approx(0.016)

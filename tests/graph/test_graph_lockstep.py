@@ -75,8 +75,16 @@ def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make
     values = {kv.key: kv.value for kv in last.values}
     expected = simulate(p, "pd_pf", DURATION).indices
     assert values["controller"] == "pd_pf" and values["cycle"] == "2"
-    for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF"):
+    for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF", "lag_xH"):
         assert float(values[name]) == getattr(expected, name)
+    # the hip lag's growth since cycle 1, beside eq. 11 (engine: cycle 1 = [1, 2] s)
+    k1 = int(round(1.0 / PERIOD))
+    sl = slice(k1, 2 * k1 + 1)
+    from hexapod_metrics.core.indices import indices_from_obs
+
+    cycle1 = indices_from_obs(ref.obs[sl], ref.reference.hip[sl], ref.reference.foot[sl], PERIOD)
+    assert float(values["lag_growth"]) == pytest.approx(expected.lag_xH - cycle1.lag_xH,
+                                                        rel=1e-9, abs=1e-15)
     report = json.loads((bag / "indices.json").read_text())
     assert report["segments"][0]["last_full_cycle"]["indices"]["eps_xH"] == expected.eps_xH
 
