@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Iterable, Mapping, Sequence
 
 from .convergence import TRACKING, Convergence
+from .indices import REPORTED_NAMES
 
 #: C3: "large degradation" = the summed tracking errors at least this many times the T_max 400 value.
 C3_FACTOR = 2.0
@@ -267,8 +268,6 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
 
 def point(conv: Convergence) -> dict[str, Measured]:
     """Every index of a checked case as :class:`Measured`."""
-    from .indices import REPORTED_NAMES
-
     return {n: Measured.of(conv, n) for n in REPORTED_NAMES}
 
 
