@@ -161,6 +161,9 @@ class _McapFile:
         self.reason = ''
         self.data_start = 0
         self.summary_damaged = False
+        self.metadata_index: dict[str, tuple[int, int]] = {}
+        self.writer: dict[str, str] = {}
+        """The ``hexapod_writer`` metadata record (state, late messages, failure), if any."""
         try:
             self._open()
         except BaseException:
@@ -220,9 +223,34 @@ class _McapFile:
             self.channels.clear()
             self.blocks.clear()
             self.counts.clear()
+            self.metadata_index.clear()
             return False
         self.summary_damaged = False
+        try:
+            self._writer_state()
+        except BagReadError:
+            self.writer = {}
         return True
+
+    def _writer_state(self) -> None:
+        """A summary written by a writer that did not close says so (killed, disk full)."""
+        where = self.metadata_index.get('hexapod_writer')
+        if where is None:
+            return
+        offset, length = where
+        body = self._read(offset + 9, length - 9) if length > 9 else b''
+        rd = _Reader(body, self.what)
+        rd.string()
+        info = rd.string_map()
+        self.writer = info
+        state = info.get('state', 'closed')
+        if state == 'open':
+            self.truncated = True
+            self.reason = ('the bag was not closed: its writer stopped (killed?) after its last'
+                           ' chunk')
+        elif state == 'failed':
+            self.truncated = True
+            self.reason = f'the writer stopped early: {info.get("failure", "write failed")}'
 
     def _parse_summary(self, data: bytes) -> None:
         pos = 0
@@ -240,6 +268,13 @@ class _McapFile:
                 self._channel(body)
             elif opcode == 0x08:
                 self.blocks.append(self._chunk_index(body))
+            elif opcode == 0x0D:
+                rd = _Reader(body, self.what)
+                offset, size = rd.u64(), rd.u64()
+                if offset + size > self.size:
+                    msg = f'{self.what}: metadata index points past the end of the file'
+                    raise BagReadError(msg)
+                self.metadata_index[rd.string()] = (offset, size)
             elif opcode == 0x0B:
                 rd = _Reader(body, self.what)
                 rd.take(42)

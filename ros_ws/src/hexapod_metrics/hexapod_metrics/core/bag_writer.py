@@ -1,22 +1,44 @@
-"""Write rosbag2 (Jazzy, metadata version 9) bags: ``metadata.yaml`` plus one MCAP file.
+"""Write rosbag2 (Jazzy, metadata version 9) bags: ``metadata.yaml`` plus MCAP files.
 
-Layout and crash safety:
+Layout:
 
 * MCAP profile ``ros2``, schemas ``ros2msg`` with rosbag2's full definition text, channels
   ``cdr`` with ``offered_qos_profiles`` and ``topic_type_hash`` metadata, like rosbag2's
-  MCAP storage plugin. Schema and Channel records go to the data section as soon as a topic
-  is added; messages go into chunks (one stream in arrival order, uncompressed by default
-  like rosbag2's MCAP plugin) followed by their Message Index records; Chunk Indexes,
-  Statistics and a ``rosbag2`` Metadata record go into the summary written at close.
-* The file always ends with a Data End record, a Footer without summary and the magic:
-  every chunk is written over the previous tail together with a new one. A writer killed
-  with SIGKILL therefore leaves a file that MCAP readers (``mcap``, ``rosbags``) read as an
-  unindexed file with every flushed chunk. A chunk is flushed when it reaches
-  ``chunk_size`` bytes or when it is older than ``flush_interval_s``.
-* ``metadata.yaml`` is written at :meth:`BagWriter.open`, when a topic is added, at most
-  every ``metadata_interval_s`` at a chunk flush, and at close; always to a temporary
-  file renamed over the old one, so it is never half written. Its counts cover the
-  messages flushed so far.
+  MCAP storage plugin. Schema and Channel records go to the data section when a topic is
+  added; messages go into chunks (uncompressed by default, like rosbag2's MCAP plugin),
+  each followed by its Message Index records.
+* Order: messages wait in a reorder buffer and each chunk takes those older than a
+  watermark, sorted by (log time, channel). With ``sync_topics`` (the topics published at
+  every tick) the watermark is the oldest "newest log time" among them, less
+  ``reorder_window_ns``: every chunk covers the same log-time span for every tick topic,
+  and chunks follow each other in log-time order. A tick topic more than ``max_lag_ns``
+  behind the others (a dead publisher) stops holding the watermark. A message older than
+  the last watermark still goes into the next chunk and is counted in
+  :attr:`BagWriter.late_messages` (the summary indexes it, so indexed readers still order).
+
+Crash safety:
+
+* After every write the file ends with a complete tail: Metadata records (``rosbag2``,
+  ``hexapod_writer`` with the writer's state, and those added with
+  :meth:`BagWriter.add_metadata`), Attachments, Data End, a summary (schemas, channels,
+  chunk indexes, attachment and metadata indexes, statistics), the summary offsets, the
+  footer and the magic. The next chunk is written over that tail together with a new one,
+  in one ``pwrite``. A writer killed with SIGKILL therefore leaves an indexed file that
+  seeking readers (``mcap``, ``rosbags``) open with every chunk flushed; its
+  ``hexapod_writer`` record says ``state: open``, so this project's reader reports it as
+  truncated. Only a kill inside that one ``pwrite`` (microseconds per chunk) leaves an
+  unfinished tail, which this project's reader scans.
+* ``metadata.yaml`` is replaced (temporary file + rename, never half written) at open,
+  when a topic is added, after every chunk and at close: it lags the MCAP by at most the
+  chunk being written.
+* A failed write (disk full, quota, I/O error) is an event, not a crash: the writer deletes
+  its space reserve (``reserve_bytes``, a file in the bag directory held since open), puts
+  the last complete tail back (marked ``state: failed`` with the reason), writes
+  ``metadata.yaml``, closes, and raises :class:`~.errors.BagStorageError`; the bag then
+  holds everything up to the last chunk written and opens in every reader.
+* Split: with ``max_file_size`` (bytes) or ``max_file_duration_ns`` (log time) a new MCAP
+  file ``<name>_<i>.mcap`` starts when the current one reaches the limit (like rosbag2's
+  ``-b``/``-d``); each file is a complete MCAP with its own schemas, channels and summary.
 """
 
 from __future__ import annotations
@@ -29,8 +51,10 @@ import threading
 import time
 import zlib
 from array import array
+from bisect import bisect_left
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from operator import itemgetter
 from pathlib import Path
 from types import TracebackType
 from typing import NamedTuple
@@ -39,16 +63,18 @@ import numpy as np
 import numpy.typing as npt
 
 from . import cdr
-from .errors import BagWriteError
+from .errors import BagStorageError, BagWriteError
 from .msgdefs import TYPE_CLOCK, TYPE_DIAGNOSTIC_ARRAY, TYPE_JOINT_STATE, TYPE_STRING, lookup
 
-__all__ = ['QOS_PRESETS', 'BagWriter', 'QosProfile', 'qos_yaml']
+__all__ = ['QOS_PRESETS', 'RESERVE_NAME', 'BagWriter', 'QosProfile', 'qos_yaml']
 
 MAGIC = b'\x89MCAP0\r\n'
 LIBRARY = 'hexapod_metrics bag_writer 1'
 ROS_DISTRO = 'jazzy'
 _INFINITE = (9223372036, 854775807)  # RMW_DURATION_INFINITE as rosbag2 writes it
 _NO_START = 2**63 - 1  # rosbag2's starting_time of a bag without messages
+RESERVE_NAME = '.hexapod_reserve'
+"""Disk space held in the bag directory while it is written (freed to close on a full disk)."""
 
 
 @dataclass(frozen=True)
@@ -98,11 +124,6 @@ _U16 = struct.Struct('<H')
 _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
 _MSG_HEADER = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, publish
-_TAIL = (
-    b'\x0f' + _U64.pack(4) + _U32.pack(0)  # Data End, no data CRC
-    + b'\x02' + _U64.pack(20) + _U64.pack(0) + _U64.pack(0) + _U32.pack(0)  # Footer
-    + MAGIC
-)
 
 
 def _string(text: str) -> bytes:
@@ -158,37 +179,73 @@ class _Topic:
     sequence: int = 0
 
 
+_Pending = tuple[int, int, bytes]
+"""(log time, channel id, Message record) waiting in the reorder buffer."""
+_ORDER = itemgetter(0, 1)
+_TIME = itemgetter(0)
+
+
 class _Commit(NamedTuple):
-    """What one write to the file added; appending it to the log is the commit."""
+    """What one write to the file added; appending it to the file's log is the commit."""
 
     end: int
     """End of the data section after this write."""
+    pending: list[_Pending]
+    """The reorder buffer after this write (shared with later commits that flush nothing)."""
     chunk_index: bytes = b''
     counts: tuple[tuple[int, int], ...] = ()
     """(channel, messages) in the chunk written."""
     start_time: int = _NO_START
     end_time: int = 0
+    tail: bytes = b''
+    """The tail written after the data section."""
 
 
 @dataclass
-class _Chunk:
-    """The chunk being filled: raw records and per-channel (log time, offset) pairs."""
+class _File:
+    """One MCAP file of the bag and the log of its committed writes."""
 
-    data: bytearray = field(default_factory=bytearray)
-    index: dict[int, array[int]] = field(default_factory=dict)
-    start: int = _NO_START
-    end: int = 0
-    opened: float = 0.0
+    path: Path
+    fd: int
+    log: list[_Commit]
+    size: int = 0
+    """Bytes in the file (the committed data section and its tail)."""
+
+    @property
+    def end(self) -> int:
+        """File offset where the data section ends and the tail starts."""
+        return self.log[-1].end
+
+    def counts(self) -> dict[int, int]:
+        """Messages per channel in the flushed chunks."""
+        out: dict[int, int] = {}
+        for commit in self.log:
+            for channel, n in commit.counts:
+                out[channel] = out.get(channel, 0) + n
+        return out
+
+    def times(self) -> tuple[int, int]:
+        """(first, last) log time of the flushed chunks."""
+        starts = [c.start_time for c in self.log if c.counts]
+        ends = [c.end_time for c in self.log if c.counts]
+        return (min(starts), max(ends)) if starts else (_NO_START, 0)
+
+    def chunks(self) -> int:
+        """Chunks in the file."""
+        return sum(1 for c in self.log if c.chunk_index)
 
 
 class BagWriter:
     """Write one rosbag2 bag directory; cheap constructor, I/O in :meth:`open`/:meth:`close`.
 
-    ``compression`` is the chunk compression: ``''`` (default: decoding is then bound by
-    memory bandwidth, about twice as fast as with zstd or lz4, see
-    ``scripts/bench_bag_decode.py``), ``'zstd'`` (level 1, about half the size) or ``'lz4'``;
-    ``chunk_size`` bounds the uncompressed chunk (and what a SIGKILL can lose), as does
-    ``flush_interval_s`` in time. ``custom_data`` goes to ``metadata.yaml``.
+    ``compression``: ``''`` (default: decoding is then bound by memory bandwidth, about
+    twice as fast as with zstd or lz4, see ``scripts/bench_bag_decode.py``), ``'zstd'``
+    (level 1, about half the size) or ``'lz4'``. A chunk is written when the reorder buffer
+    holds ``chunk_size`` bytes or every ``flush_interval_s`` (wall s); ``sync_topics``,
+    ``reorder_window_ns`` and ``max_lag_ns`` set its watermark (module docstring).
+    ``custom_data`` goes to ``metadata.yaml``; ``reserve_bytes`` of disk are held back for
+    closing the bag when the disk fills up; ``max_file_size`` (bytes) and
+    ``max_file_duration_ns`` split the bag into files (0: no limit).
     Thread-safe; :meth:`close` may be called from a signal handler, even one that
     interrupts :meth:`write` (the close then happens when that write returns).
     """
@@ -200,38 +257,82 @@ class BagWriter:
         compression: str = '',
         chunk_size: int = 1 << 20,
         flush_interval_s: float = 1.0,
-        metadata_interval_s: float = 1.0,
+        metadata_interval_s: float = 0.0,
         custom_data: Mapping[str, str] | None = None,
+        sync_topics: Sequence[str] = (),
+        reorder_window_ns: int = 0,
+        max_lag_ns: int = 2_000_000_000,
+        max_pending_bytes: int = 64 << 20,
+        reserve_bytes: int = 1 << 20,
+        max_file_size: int = 0,
+        max_file_duration_ns: int = 0,
     ) -> None:
         """Remember the settings; nothing touches the disk before :meth:`open`."""
         self.path = Path(path)
-        self.mcap_path = self.path / f'{self.path.name}_0.mcap'
         self._compression = compression
         self._compress = _compressor(compression)
         self._chunk_size = int(chunk_size)
         self._flush_interval = float(flush_interval_s)
         self._metadata_interval = float(metadata_interval_s)
         self._custom = dict(custom_data or {})
+        self._sync_names = tuple(sync_topics)
+        self._window = int(reorder_window_ns)
+        self._max_lag = int(max_lag_ns)
+        self._max_pending = int(max_pending_bytes)
+        self._reserve_size = int(reserve_bytes)
+        self._max_file_size = int(max_file_size)
+        self._max_file_duration = int(max_file_duration_ns)
         self._lock = threading.RLock()
         self._busy: int | None = None  # id of the thread inside write()/flush()
         self._closing = False
         self._close_requested = False
-        self._fd: int | None = None
         self._closed = False
-        self._log: list[_Commit] = [_Commit(0)]  # one entry per completed write
+        self._file: _File | None = None
+        self._done: list[_File] = []  # files finished (split) before the current one
         self._topics: dict[str, _Topic] = {}
+        self._by_channel: dict[int, _Topic] = {}
         self._schemas: dict[str, tuple[int, bytes]] = {}
-        self._summary_schemas: list[bytes] = []
-        self._summary_channels: list[bytes] = []
-        self._chunk = _Chunk()
+        self._channels: list[bytes] = []
+        self._records: dict[str, dict[str, str]] = {}
+        self._attachments: dict[str, tuple[str, bytes, int]] = {}
+        self._sync: set[int] = set()
+        self._latest: dict[int, int] = {}  # sync channel -> newest log time written
+        self._first_time: int | None = None
+        self._flushed_until = -1  # every chunk so far took the messages below this
+        self._opened = 0.0  # wall time of the last flush (attempt)
+        self._pending_bytes = 0
+        self._next_size_flush = self._chunk_size  # try a chunk when the buffer holds this
         self._last_metadata = 0.0
+        self._state = 'open'
+        self.failure = ''
+        """Why the writer stopped early (a failed write), or ''."""
+        self.late_messages = 0
+        """Messages that came in older than the watermark already written."""
+        self.lost_messages = 0
+        """Messages not in the bag because a write failed."""
 
     # ------------------------------------------------------------------ lifecycle
 
+    @property
+    def mcap_path(self) -> Path:
+        """The MCAP file being written (the first one before :meth:`open`)."""
+        return self._file.path if self._file else self._file_path(0)
+
+    @property
+    def mcap_paths(self) -> list[Path]:
+        """Every MCAP file of the bag so far."""
+        return [f.path for f in self._files()]
+
+    def _file_path(self, index: int) -> Path:
+        return self.path / f'{self.path.name}_{index}.mcap'
+
+    def _files(self) -> list[_File]:
+        return self._done + ([self._file] if self._file else [])
+
     def open(self) -> BagWriter:
-        """Create the bag directory, the MCAP file and a first ``metadata.yaml``."""
+        """Create the bag directory, the first MCAP file, the reserve and ``metadata.yaml``."""
         with self._lock:
-            if self._fd is not None or self._closed:
+            if self._file is not None or self._closed:
                 msg = f'bag writer for {self.path} was already opened'
                 raise BagWriteError(msg)
             try:
@@ -239,19 +340,16 @@ class BagWriter:
                     msg = f'bag path {self.path} already exists and is not an empty directory'
                     raise BagWriteError(msg)
                 self.path.mkdir(parents=True, exist_ok=True)
-                fd = os.open(self.mcap_path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+                self._make_reserve()
             except OSError as err:
                 msg = f'cannot create bag {self.path}: {err.strerror}'
                 raise BagWriteError(msg) from err
-            self._fd = fd
-            header = MAGIC + _record(0x01, _string('ros2') + _string(LIBRARY))
-            self._pwrite(header + _TAIL, 0)
-            self._log.append(_Commit(len(header)))
+            self._start_file(0)
             self._write_metadata()
         return self
 
     def close(self) -> None:
-        """Flush, write the summary and the final ``metadata.yaml``; idempotent."""
+        """Flush, write the final summary and ``metadata.yaml``; idempotent."""
         if self._busy == threading.get_ident():  # a signal handler interrupted write()
             self._close_requested = True
             return
@@ -273,16 +371,16 @@ class BagWriter:
 
     @property
     def closed(self) -> bool:
-        """True once :meth:`close` completed."""
+        """True once the bag is closed (by :meth:`close` or after a failed write)."""
         return self._closed
 
     @property
     def message_count(self) -> int:
         """Messages written so far (flushed or not)."""
-        pending = sum(len(pairs) // 2 for pairs in self._chunk.index.values())
+        pending = len(self._file.log[-1].pending) if self._file else 0
         return sum(self._flushed_counts().values()) + pending
 
-    # ------------------------------------------------------------------ topics and messages
+    # ------------------------------------------------------------------ topics, records
 
     def add_topic(
         self,
@@ -322,16 +420,44 @@ class BagWriter:
                 _U16.pack(channel_id) + _U16.pack(schema_id) + _string(name)
                 + _string('cdr') + _string_map(meta),
             )
-            self._append((schema if new_schema else b'') + channel)
             if new_schema:
                 self._schemas[msgtype] = (schema_id, schema)
-                self._summary_schemas.append(schema)
-            self._summary_channels.append(channel)
-            self._topics[name] = _Topic(name, msgtype, channel_id, profiles, type_hash)
+            self._channels.append(channel)
+            topic = _Topic(name, msgtype, channel_id, profiles, type_hash)
+            self._topics[name] = topic
+            self._by_channel[channel_id] = topic
+            if name in self._sync_names:
+                self._sync.add(channel_id)
+            self._append((schema if new_schema else b'') + channel)
             self._write_metadata()
 
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """Store (or replace) an MCAP Metadata record ``name`` of string key/values.
+
+        It is part of every tail written from now on, so a killed writer keeps it too.
+        The names ``rosbag2`` and ``hexapod_writer`` are the writer's own.
+        """
+        if name in ('rosbag2', 'hexapod_writer'):
+            msg = f'metadata record name {name!r} is reserved by the bag writer'
+            raise BagWriteError(msg)
+        items = {str(k): str(v) for k, v in data.items()}
+        with self._lock:
+            self._check_open()
+            self._records[name] = items
+            self._append(b'')
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = 'application/json',
+                       log_time_ns: int = 0) -> None:
+        """Store (or replace) an MCAP Attachment (kept in every tail, like metadata)."""
+        with self._lock:
+            self._check_open()
+            self._attachments[name] = (media_type, bytes(data), int(log_time_ns))
+            self._append(b'')
+
+    # ------------------------------------------------------------------ messages
+
     def write(self, topic: str, timestamp_ns: int, data: bytes | bytearray | memoryview) -> None:
-        """Append one serialized (CDR) message received at ``timestamp_ns`` (log time)."""
+        """Append one serialized (CDR) message with log time ``timestamp_ns``."""
         with self._lock:
             self._busy = threading.get_ident()
             try:
@@ -385,12 +511,12 @@ class BagWriter:
         self._write_typed(topic, TYPE_DIAGNOSTIC_ARRAY, stamp_ns, log_time_ns, data)
 
     def flush(self) -> None:
-        """Write the pending chunk now (it stays readable after a crash)."""
+        """Write every buffered message now, watermark or not (readable after a crash)."""
         with self._lock:
             self._check_open()
             self._busy = threading.get_ident()
             try:
-                self._flush_chunk()
+                self._flush_chunk(everything=True)
             finally:
                 self._busy = None
                 if self._close_requested:
@@ -427,15 +553,20 @@ class BagWriter:
         return tuple(qos)
 
     def _check_open(self) -> None:
-        if self._fd is None:
+        if self._file is None:
             state = 'closed' if self._closed else 'not open'
+            if self.failure:
+                state += f' ({self.failure})'
             msg = f'bag writer for {self.path} is {state}; open() it or use "with BagWriter"'
             raise BagWriteError(msg)
 
     def _write_locked(
         self, topic: str, log_time: int, data: bytes | bytearray | memoryview,
     ) -> None:
+        if self._file is None and self.failure:
+            self.lost_messages += 1
         self._check_open()
+        assert self._file is not None
         if log_time < 0:
             msg = f'{topic}: negative timestamp {log_time} ns cannot be stored'
             raise BagWriteError(msg)
@@ -443,179 +574,346 @@ class BagWriter:
         if info is None:
             msg = f'topic {topic} was not added; call add_topic({topic!r}, msgtype) first'
             raise BagWriteError(msg)
-        chunk = self._chunk
-        buf = chunk.data
-        now = time.monotonic()
-        if not buf:
-            chunk.opened = now
-        offsets = chunk.index.get(info.channel_id)
-        if offsets is None:
-            offsets = chunk.index[info.channel_id] = array('Q')
+        channel = info.channel_id
         record = _MSG_HEADER.pack(
-            5, 22 + len(data), info.channel_id, info.sequence & 0xFFFFFFFF, log_time, log_time,
+            5, 22 + len(data), channel, info.sequence & 0xFFFFFFFF, log_time, log_time,
         ) + data
-        start = len(buf)
-        chunk.start = min(chunk.start, log_time)  # a wider range than needed is harmless
-        chunk.end = max(chunk.end, log_time)
-        # One C call each, which a Python signal handler cannot split: a handler that
-        # raises leaves at worst a record without index entry (unread), never garbage.
-        buf += record
-        offsets.extend((log_time, start))
+        pending = self._file.log[-1].pending
+        if not pending:
+            self._opened = time.monotonic()
+        # One C call, which a Python signal handler cannot split: a handler that raises
+        # leaves the message either in the buffer or not, never half of it.
+        pending.append((log_time, channel, record))
         info.sequence += 1
-        if len(buf) >= self._chunk_size or now - chunk.opened >= self._flush_interval:
+        self._pending_bytes += len(record)
+        if self._first_time is None:
+            self._first_time = log_time
+        if log_time < self._flushed_until:
+            self.late_messages += 1
+        if channel in self._sync and log_time > self._latest.get(channel, -1):
+            self._latest[channel] = log_time
+        if (self._pending_bytes >= self._next_size_flush
+                or time.monotonic() - self._opened >= self._flush_interval):
             self._flush_chunk()
 
-    def _flush_chunk(self) -> None:
-        chunk = self._chunk
-        if not chunk.data:
+    def _watermark(self) -> int | None:
+        """Chunks take the buffered messages below this log time (None: all of them)."""
+        if not self._sync:
+            return None
+        first = self._first_time if self._first_time is not None else 0
+        latest = [self._latest.get(c, first - 1) for c in self._sync]
+        leader = max(latest)
+        live = [t for t in latest if leader - t <= self._max_lag]
+        cut = min(live) - self._window
+        if self._pending_bytes > self._max_pending:  # never hold more than this
+            cut = max(cut, leader - self._window)
+        return cut
+
+    def _flush_chunk(self, *, everything: bool = False) -> None:
+        assert self._file is not None
+        self._opened = time.monotonic()
+        before = self._file.log[-1].pending
+        self._next_size_flush = self._pending_bytes + self._chunk_size
+        if not before:
             return
-        raw = bytes(chunk.data)
+        cut = None if everything else self._watermark()
+        pending = sorted(before, key=_ORDER)
+        n = len(pending) if cut is None else bisect_left(pending, cut, key=_TIME)
+        if n == 0:
+            return
+        taken, rest = pending[:n], pending[n:]
+        raw = b''.join(rec for _, _, rec in taken)
+        index: dict[int, list[int]] = {}
+        at = 0
+        for log_time, channel, rec in taken:
+            index.setdefault(channel, []).extend((log_time, at))
+            at += len(rec)
+        start, end = taken[0][0], taken[-1][0]
         compressed = self._compress(raw)
         body = (
-            _U64.pack(chunk.start) + _U64.pack(chunk.end) + _U64.pack(len(raw))
+            _U64.pack(start) + _U64.pack(end) + _U64.pack(len(raw))
             + _U32.pack(zlib.crc32(raw)) + _string(self._compression)
             + _U64.pack(len(compressed)) + compressed
         )
         record = _record(0x06, body)
-        chunk_start = self._end
+        chunk_start = self._file.end
         indexes = []
         offsets = []
         at = chunk_start + len(record)
-        for channel_id, pairs in sorted(chunk.index.items()):
-            body = _U16.pack(channel_id) + _U32.pack(8 * len(pairs)) + pairs.tobytes()
-            rec = _record(0x07, body)
+        for channel_id, pairs in sorted(index.items()):
+            values = array('Q', pairs)
+            rec = _record(0x07, _U16.pack(channel_id) + _U32.pack(8 * len(values))
+                          + values.tobytes())
             offsets.append(_U16.pack(channel_id) + _U64.pack(at))
             indexes.append(rec)
             at += len(rec)
-        index_bytes = b''.join(indexes)
         offset_map = b''.join(offsets)
         chunk_index = _record(
             0x08,
-            _U64.pack(chunk.start) + _U64.pack(chunk.end) + _U64.pack(chunk_start)
+            _U64.pack(start) + _U64.pack(end) + _U64.pack(chunk_start)
             + _U64.pack(len(record)) + _U32.pack(len(offset_map)) + offset_map
-            + _U64.pack(len(index_bytes)) + _string(self._compression)
+            + _U64.pack(sum(len(r) for r in indexes)) + _string(self._compression)
             + _U64.pack(len(compressed)) + _U64.pack(len(raw)),
         )
-        counts = tuple((c, len(pairs) // 2) for c, pairs in chunk.index.items())
-        commit = _Commit(at, chunk_index, counts, chunk.start, chunk.end)
-        self._chunk = _Chunk()
-        try:
-            self._append(record + index_bytes, commit)
-        finally:
-            if self._log[-1] is not commit:  # not committed: keep the chunk for later
-                self._chunk = chunk
-        first = sum(1 for c in self._log if c.chunk_index) == 1
-        if first or time.monotonic() - self._last_metadata >= self._metadata_interval:
+        counts = tuple((c, len(pairs) // 2) for c, pairs in index.items())
+        commit = _Commit(at, rest, chunk_index, counts, start, end)
+        self._append(record + b''.join(indexes), commit)
+        self._pending_bytes = sum(len(rec) for _, _, rec in rest)
+        self._next_size_flush = self._pending_bytes + self._chunk_size
+        self._flushed_until = max(self._flushed_until, end + 1 if cut is None else cut)
+        if time.monotonic() - self._last_metadata >= self._metadata_interval:
             self._write_metadata()
-
-    @property
-    def _end(self) -> int:
-        """File offset where the data section ends and the tail starts."""
-        return self._log[-1].end
+        self._maybe_split()
 
     def _append(self, data: bytes, commit: _Commit | None = None) -> None:
-        """Write ``data`` at the end of the data section, then a fresh tail; commit it.
+        """Write ``data`` at the end of the data section and a fresh tail; commit it.
 
         The commit is one list append: a signal handler that raises cannot leave the file
         and the bookkeeping disagreeing (an uncommitted write is overwritten by the next).
+        A failed write closes the bag at its last commit and raises BagStorageError.
         """
-        self._pwrite(data + _TAIL, self._end)
-        self._log.append(commit or _Commit(self._end + len(data)))
-
-    def _flushed_counts(self) -> dict[int, int]:
-        counts: dict[int, int] = {}
-        for commit in self._log:
-            for channel, n in commit.counts:
-                counts[channel] = counts.get(channel, 0) + n
-        return counts
-
-    def _flushed_times(self) -> tuple[int, int]:
-        starts = [c.start_time for c in self._log if c.counts]
-        ends = [c.end_time for c in self._log if c.counts]
-        return (min(starts), max(ends)) if starts else (_NO_START, 0)
-
-    def _pwrite(self, data: bytes, offset: int) -> None:
-        assert self._fd is not None
-        view = memoryview(data)
+        f = self._file
+        assert f is not None
+        if commit is None:
+            commit = _Commit(f.end + len(data), f.log[-1].pending)
+        tail = self._tail(f, commit, self._state)
         try:
-            while view:
-                done = os.pwrite(self._fd, view, offset)
-                view, offset = view[done:], offset + done
+            _pwrite(f, data + tail, f.end)
+            if commit.end + len(tail) < f.size:
+                os.ftruncate(f.fd, commit.end + len(tail))
         except OSError as err:
-            msg = f'cannot write bag file {self.mcap_path}: {err.strerror}'
-            raise BagWriteError(msg) from err
+            self._fail(err)
+        f.size = commit.end + len(tail)
+        f.log.append(commit._replace(tail=tail))
 
-    def _close_locked(self) -> None:
-        self._close_requested = False
-        if self._fd is None or self._closing:
-            return
-        self._closing = True
+    def _fail(self, err: OSError) -> None:
+        """A write failed: restore a complete tail, close, raise :class:`BagStorageError`."""
+        f = self._file
+        assert f is not None
+        why = err.strerror or str(err)
+        self.failure = f'cannot write {f.path.name}: {why}'
+        self._state = 'failed'
+        self._drop_reserve()
+        self.lost_messages += len(f.log[-1].pending)
+        last = f.log[-1]
+        commit = last._replace(chunk_index=b'', counts=(), pending=[])
+        restored = False
+        for tail in (self._tail(f, commit, 'failed'), last.tail):
+            try:
+                _pwrite(f, tail, commit.end)
+                os.ftruncate(f.fd, commit.end + len(tail))
+            except OSError:
+                continue
+            restored = True
+            break
+        f.log.append(commit)
+        self._file = None
+        self._done.append(f)
+        os.close(f.fd)
+        self._closed = True
+        done = 'closed at its last complete chunk' if restored else 'left unfinished'
         try:
-            self._flush_chunk()
-            self._write_summary()
-        finally:
-            fd, self._fd = self._fd, None
-            os.close(fd)
-            self._closed = True
-        self._write_metadata(final=True)
+            self._write_metadata(final=True)
+        except BagWriteError:
+            done += ' (metadata.yaml not updated)'
+        msg = f'{self.failure}; bag {self.path} {done}; {self.lost_messages} messages lost'
+        raise BagStorageError(msg, why) from err
 
-    def _write_summary(self) -> None:
-        metadata_start = self._end
-        metadata = _record(
-            0x0C,
-            _string('rosbag2') + _string_map({'serialized_metadata': self._metadata_text(0)}),
-        )
+    def _tail(self, f: _File, commit: _Commit, state: str) -> bytes:
+        """Metadata, attachments, Data End, summary, summary offsets, footer and magic."""
+        start = commit.end
+        writer = {'state': state, 'library': LIBRARY, 'late_messages': str(self.late_messages)}
+        if self.failure:
+            writer['failure'] = self.failure
+        text = self._metadata_text(0, commit)
+        records = [('rosbag2', {'serialized_metadata': text}),
+                   ('hexapod_writer', writer), *self._records.items()]
+        data = bytearray()
+        meta_index = []
+        for name, items in records:
+            rec = _record(0x0C, _string(name) + _string_map(items))
+            meta_index.append(_record(0x0D, _U64.pack(start + len(data)) + _U64.pack(len(rec))
+                                      + _string(name)))
+            data += rec
+        attach_index = []
+        for name, (media_type, content, log_time) in self._attachments.items():
+            body = (_U64.pack(log_time) + _U64.pack(log_time) + _string(name)
+                    + _string(media_type) + _U64.pack(len(content)) + content)
+            rec = _record(0x09, body + _U32.pack(zlib.crc32(body)))
+            attach_index.append(_record(
+                0x0A, _U64.pack(start + len(data)) + _U64.pack(len(rec)) + _U64.pack(log_time)
+                + _U64.pack(log_time) + _U64.pack(len(content)) + _string(name)
+                + _string(media_type)))
+            data += rec
         data_end = b'\x0f' + _U64.pack(4) + _U32.pack(0)
-        summary_start = metadata_start + len(metadata) + len(data_end)
+        summary_start = start + len(data) + len(data_end)
+        chunk_indexes = b''.join(c.chunk_index for c in f.log) + commit.chunk_index
         groups: list[tuple[int, bytes]] = [
-            (0x03, b''.join(self._summary_schemas)),
-            (0x04, b''.join(self._summary_channels)),
-            (0x08, b''.join(c.chunk_index for c in self._log)),
-            (0x0D, _record(0x0D, _U64.pack(metadata_start) + _U64.pack(len(metadata))
-                           + _string('rosbag2'))),
-            (0x0B, self._statistics()),
+            (0x03, b''.join(s for _, s in self._schemas.values())),
+            (0x04, b''.join(self._channels)),
+            (0x08, chunk_indexes),
+            (0x0A, b''.join(attach_index)),
+            (0x0D, b''.join(meta_index)),
+            (0x0B, self._statistics(f, commit)),
         ]
-        summary = b''
-        offsets = b''
+        summary = bytearray()
+        offsets = bytearray()
         for opcode, group in groups:
             if group:
-                offsets += _record(
-                    0x0E,
-                    bytes((opcode,)) + _U64.pack(summary_start + len(summary))
-                    + _U64.pack(len(group)),
-                )
+                offsets += _record(0x0E, bytes((opcode,)) + _U64.pack(summary_start
+                                   + len(summary)) + _U64.pack(len(group)))
                 summary += group
         offset_start = summary_start + len(summary)
         footer = b'\x02' + _U64.pack(20) + _U64.pack(summary_start) + _U64.pack(offset_start)
-        crc = zlib.crc32(summary + offsets + footer)
-        tail = metadata + data_end + summary + offsets + footer + _U32.pack(crc) + MAGIC
-        self._pwrite(tail, metadata_start)
-        assert self._fd is not None
-        os.ftruncate(self._fd, metadata_start + len(tail))
+        crc = zlib.crc32(bytes(summary + offsets) + footer)
+        return b''.join((data, data_end, summary, offsets, footer, _U32.pack(crc), MAGIC))
 
-    def _statistics(self) -> bytes:
-        flushed = self._flushed_counts()
+    def _statistics(self, f: _File, commit: _Commit) -> bytes:
+        flushed = f.counts()
+        for channel, n in commit.counts:
+            flushed[channel] = flushed.get(channel, 0) + n
         counts = b''.join(
             _U16.pack(t.channel_id) + _U64.pack(flushed.get(t.channel_id, 0))
             for t in self._topics.values()
         )
         total = sum(flushed.values())
-        start, end = self._flushed_times() if total else (0, 0)
-        chunks = sum(1 for c in self._log if c.chunk_index)
+        start, end = f.times()
+        if commit.counts:
+            start, end = min(start, commit.start_time), max(end, commit.end_time)
+        if not total:
+            start = end = 0
+        chunks = f.chunks() + (1 if commit.chunk_index else 0)
         return _record(
             0x0B,
             _U64.pack(total) + _U16.pack(len(self._schemas)) + _U32.pack(len(self._topics))
-            + _U32.pack(0) + _U32.pack(1) + _U32.pack(chunks)
-            + _U64.pack(start) + _U64.pack(end) + _U32.pack(len(counts)) + counts,
+            + _U32.pack(len(self._attachments)) + _U32.pack(2 + len(self._records))
+            + _U32.pack(chunks) + _U64.pack(start) + _U64.pack(end)
+            + _U32.pack(len(counts)) + counts,
         )
 
-    def _metadata_text(self, indent: int) -> str:
-        """yaml-cpp style rosbag2 metadata (flushed messages only), keys at ``indent``."""
-        flushed = self._flushed_counts()
+    def _start_file(self, index: int) -> None:
+        """Open MCAP file ``index`` with its header, schemas and channels."""
+        path = self._file_path(index)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+        except OSError as err:
+            msg = f'cannot create bag file {path}: {err.strerror}'
+            raise BagWriteError(msg) from err
+        pending = self._file.log[-1].pending if self._file else []
+        header = MAGIC + _record(0x01, _string('ros2') + _string(LIBRARY))
+        self._file = _File(path, fd, [_Commit(len(header), pending)])
+        try:
+            _pwrite(self._file, header, 0)
+        except OSError as err:
+            self._fail(err)
+        self._append(b''.join(s for _, s in self._schemas.values()) + b''.join(self._channels))
+
+    def _maybe_split(self) -> None:
+        f = self._file
+        assert f is not None
+        start, end = f.times()
+        big = self._max_file_size and f.size >= self._max_file_size
+        long = self._max_file_duration and end - start >= self._max_file_duration
+        if not (big or long):
+            return
+        self._finish_file(f, 'split')
+        self._done.append(f)
+        self._start_file(len(self._done))
+        self._write_metadata()
+
+    def _finish_file(self, f: _File, state: str) -> None:
+        """Rewrite the tail of a finished file with its final state and close it."""
+        commit = f.log[-1]
+        tail = self._tail(f, commit._replace(chunk_index=b'', counts=()), state)
+        try:
+            _pwrite(f, tail, commit.end)
+            os.ftruncate(f.fd, commit.end + len(tail))
+        except OSError as err:
+            self._fail(err)
+        f.log.append(commit._replace(chunk_index=b'', counts=(), tail=tail, pending=[]))
+        os.close(f.fd)
+
+    def _flushed_counts(self) -> dict[int, int]:
+        counts: dict[int, int] = {}
+        for f in self._files():
+            for channel, n in f.counts().items():
+                counts[channel] = counts.get(channel, 0) + n
+        return counts
+
+    def _flushed_times(self) -> tuple[int, int]:
+        times = [f.times() for f in self._files()]
+        starts = [s for s, _ in times if s != _NO_START]
+        ends = [e for s, e in times if s != _NO_START]
+        return (min(starts), max(ends)) if starts else (_NO_START, 0)
+
+    def _make_reserve(self) -> None:
+        if self._reserve_size <= 0:
+            return
+        fd = os.open(self._reserve_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            os.posix_fallocate(fd, 0, self._reserve_size)
+        finally:
+            os.close(fd)
+
+    @property
+    def _reserve_path(self) -> Path:
+        return self.path / RESERVE_NAME
+
+    def _drop_reserve(self) -> None:
+        try:
+            self._reserve_path.unlink()
+        except OSError:
+            pass
+
+    def _close_locked(self) -> None:
+        self._close_requested = False
+        if self._file is None or self._closing:
+            return
+        self._closing = True
+        self._drop_reserve()  # room for the last chunk and the summary on a full disk
+        try:
+            self._flush_chunk(everything=True)
+            self._state = 'closed'
+            f = self._file
+            self._finish_file(f, 'closed')
+            self._done.append(f)
+            self._file = None
+        finally:
+            if self._file is not None:  # an exception before the file was finished
+                os.close(self._file.fd)
+                self._done.append(self._file)
+                self._file = None
+            self._closed = True
+        self._write_metadata(final=True)
+
+    def _file_stats(self, f: _File, extra: _Commit | None) -> tuple[dict[int, int], int, int]:
+        """Messages per channel and (first, last) log time of ``f`` with ``extra`` added."""
+        counts = f.counts()
+        start, end = f.times()
+        if extra is not None and extra.counts:
+            for channel, n in extra.counts:
+                counts[channel] = counts.get(channel, 0) + n
+            start, end = min(start, extra.start_time), max(end, extra.end_time)
+        return counts, start, end
+
+    def _metadata_text(self, indent: int, extra: _Commit | None = None) -> str:
+        """yaml-cpp style rosbag2 metadata (flushed messages only), keys at ``indent``.
+
+        ``extra`` is a commit of the current file about to be written."""
+        files = []
+        flushed: dict[int, int] = {}
+        for f in self._files():
+            counts, start, end = self._file_stats(f, extra if f is self._file else None)
+            files.append((f.path.name, sum(counts.values()), start, end))
+            for channel, n in counts.items():
+                flushed[channel] = flushed.get(channel, 0) + n
+        if not files:
+            files.append((self._file_path(0).name, 0, _NO_START, 0))
         total = sum(flushed.values())
-        start, end = self._flushed_times()
+        starts = [s for _, n, s, _ in files if n]
+        start = min(starts) if starts else _NO_START
+        end = max((e for _, n, _, e in files if n), default=0)
         duration = end - start if total else 0
-        name = self.mcap_path.name
         lines = [
             'version: 9',
             'storage_identifier: mcap',
@@ -642,19 +940,18 @@ class BagWriter:
                 ]
         else:
             lines.append('topics_with_message_count: []')
-        lines += [
-            'compression_format: ""',
-            'compression_mode: ""',
-            'relative_file_paths:',
-            f'  - {_scalar(name)}',
-            'files:',
-            f'  - path: {_scalar(name)}',
-            '    starting_time:',
-            f'      nanoseconds_since_epoch: {start}',
-            '    duration:',
-            f'      nanoseconds: {duration}',
-            f'    message_count: {total}',
-        ]
+        lines += ['compression_format: ""', 'compression_mode: ""', 'relative_file_paths:']
+        lines += [f'  - {_scalar(name)}' for name, _, _, _ in files]
+        lines.append('files:')
+        for name, count, f_start, f_end in files:
+            lines += [
+                f'  - path: {_scalar(name)}',
+                '    starting_time:',
+                f'      nanoseconds_since_epoch: {f_start if count else _NO_START}',
+                '    duration:',
+                f'      nanoseconds: {f_end - f_start if count else 0}',
+                f'    message_count: {count}',
+            ]
         if self._custom:
             lines.append('custom_data:')
             lines += [f'  {_scalar(k)}: {_scalar(v)}' for k, v in self._custom.items()]
@@ -664,7 +961,10 @@ class BagWriter:
         return '\n'.join(' ' * indent + line for line in lines)
 
     def _write_metadata(self, *, final: bool = False) -> None:
-        """Atomically replace ``metadata.yaml`` (tmp file + rename)."""
+        """Atomically replace ``metadata.yaml`` (tmp file + rename).
+
+        Only the final write raises: before it, a failure (disk full) keeps the previous
+        file, and the next MCAP write fails and closes the bag (:meth:`_fail`)."""
         text = 'rosbag2_bagfile_information:\n' + self._metadata_text(2)
         target = self.path / 'metadata.yaml'
         tmp = self.path / '.metadata.yaml.tmp'
@@ -676,6 +976,20 @@ class BagWriter:
                     os.fsync(fh.fileno())
             os.replace(tmp, target)
         except OSError as err:
-            msg = f'cannot write {target}: {err.strerror}'
-            raise BagWriteError(msg) from err
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+            if final:
+                msg = f'cannot write {target}: {err.strerror}'
+                raise BagWriteError(msg) from err
+            return
         self._last_metadata = time.monotonic()
+
+
+def _pwrite(f: _File, data: bytes, offset: int) -> None:
+    """Write all of ``data`` at ``offset`` of ``f`` (raises OSError)."""
+    view = memoryview(data)
+    while view:
+        done = os.pwrite(f.fd, view, offset)
+        view, offset = view[done:], offset + done

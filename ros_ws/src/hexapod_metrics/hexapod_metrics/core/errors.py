@@ -7,7 +7,7 @@ errors, ...) are translated at the module boundary with ``raise BagReadError(msg
 
 from __future__ import annotations
 
-__all__ = ['BagError', 'BagReadError', 'BagTruncatedWarning', 'BagWriteError']
+__all__ = ['BagError', 'BagReadError', 'BagStorageError', 'BagTruncatedWarning', 'BagWriteError']
 
 
 class BagError(Exception):
@@ -16,6 +16,19 @@ class BagError(Exception):
 
 class BagWriteError(BagError):
     """A bag could not be written (bad path, unknown topic or type, writer closed, disk full)."""
+
+
+class BagStorageError(BagWriteError):
+    """The file system refused a write (disk full, quota, I/O error).
+
+    The writer has already closed the bag at its last complete chunk (readable by every
+    reader); ``reason`` is the system's message, e.g. ``No space left on device``.
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        """``message`` says what happened to the bag; ``reason`` is the OS error text."""
+        super().__init__(message)
+        self.reason = reason
 
 
 class BagReadError(BagError):
