@@ -140,7 +140,11 @@ start metrics hexapod_metrics.metrics_node main 10 -p "bag_path:=$bag" "${sim_ti
 start trajectory_generator hexapod_control.trajectory_node main 0 "${sim_time_arg[@]}"
 start pd_p_controller hexapod_control.controller_node main_pd_p 0 "${sim_time_arg[@]}"
 start pd_pf_controller hexapod_control.controller_node main_pd_pf 0 "${sim_time_arg[@]}"
-if (( markers )); then start markers hexapod_metrics.marker_node main 0 "${sim_time_arg[@]}"; fi
+if (( markers )); then
+  start markers hexapod_metrics.marker_node main 0 "${sim_time_arg[@]}"
+  # tick 0 waits for the markers node too, so the markers cover the run from t = 0
+  sim_extra+=(-p "wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller,metrics,markers")
+fi
 start hexapod_sim hexapod_sim.sim_node main 0 "${sim_extra[@]}"
 
 set +e

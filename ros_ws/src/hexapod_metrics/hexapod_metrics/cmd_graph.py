@@ -33,6 +33,7 @@ NODES: dict[str, tuple[str, str]] = {
     "pd_p_controller": ("hexapod_control.controller_node", "main_pd_p"),
     "pd_pf_controller": ("hexapod_control.controller_node", "main_pd_pf"),
     "metrics": ("hexapod_metrics.metrics_node", "main"),
+    "markers": ("hexapod_metrics.marker_node", "main"),
 }
 #: Scheduling niceness per node: the recorder yields the CPU to the control loop (it only
 #: has to keep up on average; its queues absorb seconds of lag).

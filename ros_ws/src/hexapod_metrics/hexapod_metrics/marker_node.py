@@ -102,8 +102,10 @@ class MarkerNode(Node):
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
         for topic in STATE:
+            # Deep queues: a marker for every 1/rate s of sim time, even when this node
+            # falls behind the sim for a while (a short queue rolled over: gaps of 66-264 ms).
             self.loop.subscribe(JointState, topic, self._make_cb(topic),
-                                C.TOPIC_QOS[topic].subscriber(C.CONTROL_DEPTH))
+                                C.TOPIC_QOS[topic].subscriber(C.RECORD_DEPTH))
 
     def _make_cb(self, topic: str):  # type: ignore[no-untyped-def]
         codec = C.CODECS[topic]

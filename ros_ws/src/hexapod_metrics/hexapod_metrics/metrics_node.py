@@ -5,14 +5,25 @@ way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCA
 (:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
-transient-local) and every parameter in the bag's ``custom_data``. The log time of a
-message is its stamp (simulated time); messages without a stamp of their own (the active
-controller, the markers) get the latest ``/clock``. The node takes its messages in
+transient-local) and every parameter in the bag's ``custom_data``. The log time of every
+message is its own simulated time (:mod:`~hexapod_metrics.core.log_times`): the header
+stamp, a MarkerArray's first marker stamp, and for ``/hexapod/active_controller`` the tick
+the switch took effect (the first joint_states naming that controller). Chunks are cut at
+a watermark over the tick topics (:data:`TICK_TOPICS`, less ``reorder_window`` s of sim
+time), so every chunk covers the same ticks of every tick topic, in log-time order, and
+every chunk leaves a complete, indexed MCAP behind it. The node takes its messages in
 batches (``batch_interval``, default 5 ms) so that it does not compete with the control
 loop for the CPU; the queues (10000 messages per topic) cover seconds of lag. SIGINT and
 SIGTERM stop the node cleanly: the messages already received are taken and written, the
 bag is closed (summary and ``metadata.yaml``) and ``indices.json`` is written. After a
-SIGKILL the bag stays readable up to its last flushed chunk (at most ~1 s of data lost).
+SIGKILL the bag stays indexed and readable up to its last chunk (the reorder window plus
+at most one chunk, ~1 s of sim time, is lost) and says it was not closed.
+
+A write that fails (disk full, quota, I/O error) stops the recording: the bag is closed at
+its last complete chunk (readable everywhere), an ERROR status named ``metrics`` with the
+reason goes out on ``/hexapod/status``, and the node exits with code
+:data:`EXIT_RECORDING_FAILED` (3). Other exit codes: 0 clean, 1 other error, 2 bad
+parameters.
 
 Indices: the seven indices (:func:`hexapod_metrics.core.indices.compute_indices`) of each gait
 cycle c, over the ticks k_a = c N .. k_b = (c + 1) N with N = T / Delta t (the sums run
@@ -33,6 +44,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -44,12 +56,15 @@ from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_par
 
 from .core import cdr
 from .core.bag_writer import BagWriter
-from .core.errors import BagError
+from .core.errors import BagError, BagStorageError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
-from .core.recording import TOPICS, bag_custom_data, indices_status
+from .core.log_times import ControllerLogTimes, marker_array_stamp
+from .core.recording import TICK_TOPICS, TOPICS, bag_custom_data, indices_status
 
 #: The state topics a cycle's indices need, all stamped per tick.
 CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
+#: Exit code of a recorder whose bag could not be written to the end (disk full, ...).
+EXIT_RECORDING_FAILED = 3
 
 
 def frame_of(data: bytes) -> str:
@@ -158,10 +173,24 @@ class MetricsNode(Node):
                                                 "bag directory (must not exist)") or default)
         batch = declare_node_param(self, "batch_interval", 0.005,
                                    "s between two takes of the queued messages")
+        window = declare_node_param(self, "reorder_window", 0.5,
+                                    "sim s a chunk waits for late messages behind the ticks")
+        max_size = declare_node_param(self, "max_bag_size", 0,
+                                      "bytes per MCAP file before a new one starts (0: one file)")
+        max_duration = declare_node_param(self, "max_bag_duration", 0.0,
+                                          "sim s per MCAP file before a new one starts (0: one)")
         self.period = p.sim.control_period
         self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
-        self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"))
+        self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"),
+                                flush_interval_s=0.5, sync_topics=TICK_TOPICS,
+                                follow_topics=(T.MARKERS,),
+                                reorder_window_ns=int(window * 1e9),
+                                max_file_size=int(max_size),
+                                max_file_duration_ns=int(max_duration * 1e9))
         self.writer.open()
+        self.failure: BagStorageError | None = None
+        self.dropped = 0  # messages received after the recording failed
+        self.controller_times = ControllerLogTimes()
         for topic, (msgtype, _) in TOPICS.items():
             self.writer.add_topic(topic, msgtype, C.TOPIC_QOS[topic].preset)
         self.clock_ns = 0
@@ -169,6 +198,8 @@ class MetricsNode(Node):
         self.loop = HotLoop(self, batch_interval=batch)
         self.pub_indices = self.create_publisher(DiagnosticArray, T.INDICES,
                                                  C.TOPIC_QOS[T.INDICES].publisher())
+        self.pub_status = self.create_publisher(DiagnosticArray, T.STATUS,
+                                                C.TOPIC_QOS[T.STATUS].publisher())
         for topic in TOPICS:
             if topic in (T.INDICES, T.CLOCK):
                 continue
@@ -176,34 +207,51 @@ class MetricsNode(Node):
         self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
         self.log.info(f"recording to {self.bag_path}")
 
+    def _write(self, topic: str, log_time: int, data: bytes) -> None:
+        """Record one message; a failed write ends the recording (see the module doc)."""
+        if self.failure is not None:
+            self.dropped += 1
+            return
+        try:
+            self.writer.write(topic, log_time, data)
+        except BagStorageError as err:
+            self.failure = err
+            self.loop.stop()
+            return
+        self.counts[topic] += 1
+
+    def _write_controller(self, items: list[tuple[int, bytes]]) -> None:
+        for log_time, data in items:
+            self._write(T.ACTIVE_CONTROLLER, log_time, data)
+            self.log.info(f"controller in charge: {C.decode_string(data)} "
+                          f"(from sim time {log_time * 1e-9:.3f} s)")
+
     def _subscribe(self, topic: str) -> None:
         q = C.TOPIC_QOS[topic]
         if topic in CYCLE_TOPICS:
             def cb(data: bytes, topic: str = topic) -> None:
                 stamp = C.decode_stamp(data)
-                self.writer.write(topic, stamp, data)
-                self.counts[topic] += 1
+                self._write(topic, stamp, data)
+                if topic == T.JOINT_STATES:
+                    self._write_controller(self.controller_times.on_state(stamp,
+                                                                          frame_of(data)))
                 for cycle in self.scorer.add(topic, stamp, data):
                     self._publish_cycle(cycle)
         elif topic == T.CLOCK:
             def cb(data: bytes, topic: str = topic) -> None:
                 self.clock_ns = max(self.clock_ns, C.decode_stamp(data))
-                self.writer.write(topic, C.decode_stamp(data), data)
-                self.counts[topic] += 1
-        elif topic == T.MARKERS:  # no header of its own: log at the latest clock
+                self._write(topic, C.decode_stamp(data), data)
+        elif topic == T.MARKERS:  # the first marker's stamp (the latest clock if empty)
             def cb(data: bytes, topic: str = topic) -> None:
-                self.writer.write(topic, self.clock_ns, data)
-                self.counts[topic] += 1
-        elif topic == T.ACTIVE_CONTROLLER:
+                stamp = marker_array_stamp(data)
+                self._write(topic, self.clock_ns if stamp is None else stamp, data)
+        elif topic == T.ACTIVE_CONTROLLER:  # at the tick the switch took effect
             def cb(data: bytes, topic: str = topic) -> None:
-                self.writer.write(topic, self.clock_ns, data)
-                self.counts[topic] += 1
-                self.log.info(f"controller in charge: {C.decode_string(data)} "
-                              f"(sim time {self.clock_ns * 1e-9:.3f} s)")
+                self._write_controller(
+                    self.controller_times.on_controller(C.decode_string(data), data))
         else:  # stamped: joint_commands, status
             def cb(data: bytes, topic: str = topic) -> None:
-                self.writer.write(topic, C.decode_stamp(data), data)
-                self.counts[topic] += 1
+                self._write(topic, C.decode_stamp(data), data)
         self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
 
     def _publish_cycle(self, cycle: dict[str, Any]) -> None:
@@ -218,8 +266,7 @@ class MetricsNode(Node):
         stamp = T.stamp_ns(cycle["t_b"])
         data = cdr.encode_diagnostic_array(stamp, [status])
         self.pub_indices.publish(data)
-        self.writer.write(T.INDICES, stamp, data)
-        self.counts[T.INDICES] += 1
+        self._write(T.INDICES, stamp, data)
         self.log.info(
             f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
             f"({cycle['controller']}): "
@@ -229,17 +276,56 @@ class MetricsNode(Node):
 
     def close(self) -> None:
         """Take what is queued, close the bag, write indices.json; idempotent."""
-        if self.writer.closed:
+        if self.closed:
             return
+        self.closed = True
         try:
-            self.loop.drain()
+            if self.failure is None:
+                self.loop.drain()
+                self._write_controller(self.controller_times.flush())
         finally:
-            self.writer.close()
-        report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report()}
-        (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
+            try:
+                self.writer.close()
+            except BagStorageError as err:  # the last chunk did not fit
+                self.failure = err
+        report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report(),
+                  "recording": self.recording_report()}
+        try:
+            (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
+        except OSError as err:
+            self.log.error(f"cannot write indices.json: {err.strerror}")
+        if self.failure is not None:
+            self.report_failure()
+            return
+        late = self.writer.late_messages
         self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
-            f"{len(self.scorer.cycles)} cycles scored)")
+            f"{len(self.scorer.cycles)} cycles scored"
+            + (f", {late} came in after their chunk" if late else "") + ")")
+
+    closed = False
+
+    def recording_report(self) -> dict[str, Any]:
+        """How the recording ended: state, failure, late and lost messages."""
+        return {"state": "failed" if self.failure else "closed",
+                "failure": str(self.failure) if self.failure else "",
+                "late_messages": self.writer.late_messages,
+                "lost_messages": self.writer.lost_messages + self.dropped,
+                "unmatched_controller_messages": self.controller_times.unmatched}
+
+    def report_failure(self) -> None:
+        """Say on /hexapod/status and in the log that the recording stopped, and why."""
+        err = self.failure
+        assert err is not None
+        values = {"bag": str(self.bag_path), "reason": err.reason,
+                  "sim_time": f"{self.clock_ns * 1e-9:.6f}",
+                  "messages_written": str(sum(self.counts.values())),
+                  "messages_lost": str(self.writer.lost_messages + self.dropped),
+                  "exit_code": str(EXIT_RECORDING_FAILED)}
+        status = C.Status("metrics", "error", f"recording stopped: {err}", values)
+        self.pub_status.publish(C.diagnostic_array(self.clock_ns, [status]))
+        self.pub_status.wait_for_all_acked(Duration(seconds=2))
+        self.log.error(f"recording stopped at sim time {self.clock_ns * 1e-9:.3f} s: {err}")
 
 
 def main(args: list[str] | None = None) -> int:
@@ -252,6 +338,8 @@ def main(args: list[str] | None = None) -> int:
         node = MetricsNode()
         install_stop_signals(node.loop)
         node.loop.spin()
+        if node.failure is not None:
+            code = EXIT_RECORDING_FAILED
     except (HexapodError, BagError) as err:
         rclpy.logging.get_logger("metrics").error(str(err))
         code = 2 if isinstance(err, ParameterError) else 1
@@ -261,6 +349,8 @@ def main(args: list[str] | None = None) -> int:
         if node is not None:
             try:
                 node.close()
+                if node.failure is not None:
+                    code = EXIT_RECORDING_FAILED
             finally:
                 node.loop.destroy()
                 node.destroy_node()

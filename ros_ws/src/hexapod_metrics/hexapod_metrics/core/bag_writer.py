@@ -9,10 +9,12 @@ Layout:
   each followed by its Message Index records.
 * Order: messages wait in a reorder buffer and each chunk takes those older than a
   watermark, sorted by (log time, channel). With ``sync_topics`` (the topics published at
-  every tick) the watermark is the oldest "newest log time" among them, less
+  every tick) the watermark is the oldest "newest log time" among them (and
+  among the ``follow_topics`` seen so far: slower, optional publishers), less
   ``reorder_window_ns``: every chunk covers the same log-time span for every tick topic,
   and chunks follow each other in log-time order. A tick topic more than ``max_lag_ns``
-  behind the others (a dead publisher) stops holding the watermark. A message older than
+  behind the others (a dead publisher) stops holding the watermark; one never seen holds
+  it for ``unseen_wait_s`` (wall s) after the first message. A message older than
   the last watermark still goes into the next chunk and is counted in
   :attr:`BagWriter.late_messages` (the summary indexes it, so indexed readers still order).
 
@@ -260,9 +262,11 @@ class BagWriter:
         metadata_interval_s: float = 0.0,
         custom_data: Mapping[str, str] | None = None,
         sync_topics: Sequence[str] = (),
+        follow_topics: Sequence[str] = (),
         reorder_window_ns: int = 0,
         max_lag_ns: int = 2_000_000_000,
         max_pending_bytes: int = 64 << 20,
+        unseen_wait_s: float = 10.0,
         reserve_bytes: int = 1 << 20,
         max_file_size: int = 0,
         max_file_duration_ns: int = 0,
@@ -276,6 +280,7 @@ class BagWriter:
         self._metadata_interval = float(metadata_interval_s)
         self._custom = dict(custom_data or {})
         self._sync_names = tuple(sync_topics)
+        self._follow_names = tuple(follow_topics)
         self._window = int(reorder_window_ns)
         self._max_lag = int(max_lag_ns)
         self._max_pending = int(max_pending_bytes)
@@ -296,8 +301,11 @@ class BagWriter:
         self._records: dict[str, dict[str, str]] = {}
         self._attachments: dict[str, tuple[str, bytes, int]] = {}
         self._sync: set[int] = set()
+        self._follow: set[int] = set()
         self._latest: dict[int, int] = {}  # sync channel -> newest log time written
         self._first_time: int | None = None
+        self._first_wall = 0.0
+        self._unseen_wait = float(unseen_wait_s)
         self._flushed_until = -1  # every chunk so far took the messages below this
         self._opened = 0.0  # wall time of the last flush (attempt)
         self._pending_bytes = 0
@@ -428,6 +436,8 @@ class BagWriter:
             self._by_channel[channel_id] = topic
             if name in self._sync_names:
                 self._sync.add(channel_id)
+            elif name in self._follow_names:
+                self._follow.add(channel_id)
             self._append((schema if new_schema else b'') + channel)
             self._write_metadata()
 
@@ -588,9 +598,11 @@ class BagWriter:
         self._pending_bytes += len(record)
         if self._first_time is None:
             self._first_time = log_time
+            self._first_wall = time.monotonic()
         if log_time < self._flushed_until:
             self.late_messages += 1
-        if channel in self._sync and log_time > self._latest.get(channel, -1):
+        if ((channel in self._sync or channel in self._follow)
+                and log_time > self._latest.get(channel, -1)):
             self._latest[channel] = log_time
         if (self._pending_bytes >= self._next_size_flush
                 or time.monotonic() - self._opened >= self._flush_interval):
@@ -600,11 +612,15 @@ class BagWriter:
         """Chunks take the buffered messages below this log time (None: all of them)."""
         if not self._sync:
             return None
-        first = self._first_time if self._first_time is not None else 0
-        latest = [self._latest.get(c, first - 1) for c in self._sync]
+        latest = [self._latest[c] for c in (*self._sync, *self._follow) if c in self._latest]
+        if not latest:
+            return -1
         leader = max(latest)
         live = [t for t in latest if leader - t <= self._max_lag]
         cut = min(live) - self._window
+        if (len(self._sync - self._latest.keys())
+                and time.monotonic() - self._first_wall < self._unseen_wait):
+            cut = -1  # a tick topic not seen yet: wait for it (a while) before the 1st chunk
         if self._pending_bytes > self._max_pending:  # never hold more than this
             cut = max(cut, leader - self._window)
         return cut

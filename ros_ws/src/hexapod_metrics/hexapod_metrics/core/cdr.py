@@ -29,6 +29,7 @@ from .errors import BagReadError
 
 __all__ = [
     'ENCAPSULATION',
+    'MAX_DDS_PADDING',
     'DiagnosticStatus',
     'JointStateArrays',
     'JointStateDecoder',
@@ -52,6 +53,8 @@ __all__ = [
 
 ENCAPSULATION = b'\x00\x01\x00\x00'
 """CDR_LE, no options: what rclpy writes in front of every message."""
+MAX_DDS_PADDING = 3
+"""Zero bytes DDS may append to a serialized payload (up to a multiple of 4 bytes)."""
 
 _NS = 1_000_000_000
 _U32 = struct.Struct('<I')
@@ -281,9 +284,11 @@ class _Reader:
         return arr
 
     def end(self) -> None:
-        """Check the size: rclpy's length is Fast-CDR's estimate, up to 8 bytes too long."""
+        """Check the size: rclpy's length is Fast-CDR's estimate, up to 8 bytes too long,
+        and DDS pads a serialized payload with up to 3 zero bytes to a multiple of 4."""
         extra = len(self.data) - self.pos
-        if extra not in (0, self.phantom):
+        padded = 0 < extra <= MAX_DDS_PADDING and not any(self.data[self.pos:])
+        if extra not in (0, self.phantom) and not padded:
             msg = f'CDR message has {extra} unexpected trailing bytes'
             raise BagReadError(msg)
         if self.mask is not None:

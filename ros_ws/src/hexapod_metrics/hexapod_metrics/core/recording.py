@@ -34,6 +34,10 @@ TOPICS: dict[str, tuple[str, str]] = {
     T.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
     T.MARKERS: ("visualization_msgs/msg/MarkerArray", "reliable"),
 }
+#: The topics published at every control tick: the recorder cuts its chunks at the same
+#: tick of all of them (so a killed recorder truncates them all at one tick).
+TICK_TOPICS = (T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
+               T.JOINT_COMMANDS)
 
 
 def bag_custom_data(p: HexapodParams, source: str) -> dict[str, str]:
@@ -115,5 +119,5 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["PARAMS_KEY", "TOPICS", "bag_custom_data", "indices_status", "params_from_custom_data",
+__all__ = ["PARAMS_KEY", "TICK_TOPICS", "TOPICS", "bag_custom_data", "indices_status", "params_from_custom_data",
            "status_indices", "write_run_bag"]

@@ -1,0 +1,96 @@
+"""Checks of a graph bag with independent readers (rosbags, the mcap library)."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hexapod_metrics.core.recording import TICK_TOPICS
+
+MS = 1_000_000
+
+
+def mcap_file(bag: Path) -> Path:
+    """The bag's only MCAP file."""
+    files = sorted(bag.glob("*.mcap"))
+    assert len(files) == 1, files
+    return files[0]
+
+
+def mcap_size(bag: Path) -> int:
+    """Size of the bag's MCAP file (0 before it exists)."""
+    files = list(bag.glob("*.mcap"))
+    return files[0].stat().st_size if files else 0
+
+
+def read_with_mcap(path: Path) -> dict[str, Any]:
+    """Everything the mcap library's seeking reader says about one MCAP file."""
+    from mcap.reader import SeekingReader
+
+    with open(path, "rb") as fh:
+        reader = SeekingReader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        assert summary is not None, f"{path.name}: no summary (not indexed)"
+        channels = {c.id: c.topic for c in summary.channels.values()}
+        stats = {channels[c]: n for c, n in summary.statistics.channel_message_counts.items()}
+        writer = {m.name: m.metadata for m in reader.iter_metadata()}
+        file_order = [(c.topic, m.log_time, m.data)
+                      for _, c, m in reader.iter_messages(log_time_order=False)]
+        chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+        last = chunks[-1] if chunks else None
+    return {"stats": stats, "metadata": writer, "messages": file_order, "last_chunk": last}
+
+
+def read_with_rosbags(bag: Path) -> list[tuple[str, int, Any]]:
+    """(topic, log time, decoded message) of every message, as rosbags yields them."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag]) as reader:
+        return [(c.topic, t, reader.deserialize(raw, c.msgtype))
+                for c, t, raw in reader.messages()]
+
+
+def metadata_counts(bag: Path) -> dict[str, int]:
+    """Per-topic message counts of metadata.yaml."""
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return {t["topic_metadata"]["name"]: t["message_count"]
+            for t in info["topics_with_message_count"]}
+
+
+def check_indexed_ordered_bag(bag: Path) -> dict[str, list[int]]:
+    """Assert what R11 asks of a bag, killed or not; return the tick topics' stamps (ns)."""
+    seen = read_with_mcap(mcap_file(bag))
+    messages = seen["messages"]
+    assert messages, f"{bag}: no message"
+    late = int(seen["metadata"]["hexapod_writer"]["late_messages"])
+    steps_back = sum(1 for (_, a, _), (_, b, _) in zip(messages, messages[1:]) if b < a)
+    assert steps_back <= late, f"{steps_back} steps back in file order, {late} late messages"
+    by_topic: dict[str, list[int]] = {}
+    for topic, log_time, _ in messages:
+        by_topic.setdefault(topic, []).append(log_time)
+    for topic in TICK_TOPICS:  # each tick topic in order, one message per tick, no gap
+        stamps = by_topic[topic]
+        assert all(b - a == MS for a, b in zip(stamps, stamps[1:])), f"{topic} has a gap"
+    ends = {t: by_topic[t][-1] for t in TICK_TOPICS if t != "/hexapod/reference"}
+    assert len(set(ends.values())) == 1, f"tick topics end at different ticks: {ends}"
+    # the reference runs one tick ahead of the state it answers
+    assert by_topic["/hexapod/reference"][-1] - next(iter(ends.values())) in (0, MS)
+    assert {t: len(v) for t, v in by_topic.items()} == {
+        t: n for t, n in seen["stats"].items() if n}
+    # rosbags reads the same messages (indexed, so in log-time order)
+    rb = read_with_rosbags(bag)
+    assert len(rb) == len(messages)
+    assert all(b >= a for (_, a, _), (_, b, _) in zip(rb, rb[1:]))
+    js = [m for t, _, m in rb if t == "/hexapod/joint_states"]
+    assert len(js) == len(by_topic["/hexapod/joint_states"])
+    # metadata.yaml lags the MCAP by at most its last chunk
+    listed = metadata_counts(bag)
+    last = seen["last_chunk"]
+    in_last: dict[str, int] = {}
+    for topic, log_time, _ in messages:
+        if last.message_start_time <= log_time <= last.message_end_time:
+            in_last[topic] = in_last.get(topic, 0) + 1
+    for topic, n in seen["stats"].items():
+        assert n - in_last.get(topic, 0) <= listed.get(topic, 0) <= n, (topic, n, listed)
+    return {t: by_topic[t] for t in TICK_TOPICS}

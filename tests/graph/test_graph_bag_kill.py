@@ -1,0 +1,57 @@
+"""A recorder killed with SIGKILL at several points leaves indexed, ordered bags (R11).
+
+One graph runs; three recorders join it one after another and are killed at different
+points: the first (there from tick 0) right after its first chunk, the two that join
+mid-run after ~12 and ~16 MB (their first ~10 MB are the transient-local history of the
+reference and the commands, 5000 ticks each, older than any joint state they get). Every bag must open in
+the mcap library's seeking reader and in rosbags (indexed: a summary), hold its tick topics
+in log-time order without gaps, end them all at the same tick, agree with metadata.yaml up
+to the last chunk, and be reported truncated by ``hexapod analyze``.
+"""
+from __future__ import annotations
+
+import signal
+
+from hexapod_metrics.core.analysis import analyze_bag
+from hexapod_metrics.core.bag_reader import open_bag
+from hexapod_sim.core import topics as T
+
+from .bag_checks import check_indexed_ordered_bag, mcap_size
+
+#: Bytes a killed recorder's MCAP must have grown past its empty start before the kill.
+KILL_AFTER = (1, 12_000_000, 16_000_000)
+
+
+def test_killed_recorders_leave_indexed_ordered_bags(make_graph, tmp_path):
+    g = make_graph()
+    g.start("metrics", f"bag_path:={tmp_path / 'first'}", node="metrics")
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller,metrics")
+    g.wait_log("hexapod_sim", "Hz control", timeout=180)
+    bags = []
+    for i, grow in enumerate(KILL_AFTER):
+        bag = tmp_path / ("first" if i == 0 else f"kill{i}")
+        if i:
+            g.start("metrics", f"bag_path:={bag}", node="metrics")
+        g.wait_for(lambda bag=bag: mcap_size(bag) > 0, 120, f"{bag.name} created")
+        empty = mcap_size(bag)
+        g.wait_for(lambda bag=bag, empty=empty, grow=grow: mcap_size(bag) >= empty + grow,
+                   180, f"{bag.name} grown by {grow} bytes")
+        assert g.kill("metrics", signal.SIGKILL) == -signal.SIGKILL
+        bags.append(bag)
+    assert g.procs["hexapod_sim"].poll() is None  # the graph went on without its recorders
+
+    for bag in bags:
+        stamps = check_indexed_ordered_bag(bag)
+        n = len(stamps[T.JOINT_STATES])
+        assert n > 0
+        with open_bag(bag) as b:  # our reader: indexed, but the writer never closed it
+            assert b.truncated and "not closed" in b.truncation_reason
+            assert b.topics[T.JOINT_STATES].message_count == n
+        a = analyze_bag(bag)
+        assert a.truncated
+        assert a.ticks <= n
+        # a cycle is scored only if all its ticks are in the bag
+        last = stamps[T.JOINT_STATES][-1] * 1e-9
+        assert all(c.t_b <= last + 1e-9 for c in a.cycles)
