@@ -622,6 +622,12 @@ def _block_messages(
             yield ids[channel], int(log_time), raw[pos + 31:pos + 9 + length]
 
 
+def _file_order(path: Path) -> tuple[str, int]:
+    """Sort key of split files: ``bag_2.mcap`` before ``bag_10.mcap``."""
+    stem, _, index = path.stem.rpartition('_')
+    return (stem, int(index)) if index.isdigit() else (path.stem, -1)
+
+
 def _bag_files(path: Path) -> tuple[Path, list[Path], dict[str, Any] | None]:
     """Resolve a bag path to its MCAP files and parsed metadata."""
     import yaml
@@ -656,7 +662,7 @@ def _bag_files(path: Path) -> tuple[Path, list[Path], dict[str, Any] | None]:
             raise BagReadError(msg)
         if files:
             return path, files, metadata
-    files = sorted(path.glob('*.mcap'))
+    files = sorted(path.glob('*.mcap'), key=_file_order)
     if not files:
         msg = f'{path}: no metadata.yaml and no .mcap file, not a rosbag2 bag directory'
         raise BagReadError(msg)

@@ -846,7 +846,7 @@ class BagWriter:
             os.ftruncate(f.fd, commit.end + len(tail))
         except OSError as err:
             self._fail(err)
-        f.log.append(commit._replace(chunk_index=b'', counts=(), tail=tail, pending=[]))
+        f.log.append(commit._replace(chunk_index=b'', counts=(), tail=tail))
         os.close(f.fd)
 
     def _flushed_counts(self) -> dict[int, int]:
