@@ -52,7 +52,6 @@ import struct
 import threading
 import time
 import zlib
-from array import array
 from bisect import bisect_left
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -302,6 +301,7 @@ class BagWriter:
         self._attachments: dict[str, tuple[str, bytes, int]] = {}
         self._sync: set[int] = set()
         self._follow: set[int] = set()
+        self._watched: set[int] = set()
         self._latest: dict[int, int] = {}  # sync channel -> newest log time written
         self._first_time: int | None = None
         self._first_wall = 0.0
@@ -438,6 +438,7 @@ class BagWriter:
                 self._sync.add(channel_id)
             elif name in self._follow_names:
                 self._follow.add(channel_id)
+            self._watched = self._sync | self._follow
             self._append((schema if new_schema else b'') + channel)
             self._write_metadata()
 
@@ -589,8 +590,9 @@ class BagWriter:
             5, 22 + len(data), channel, info.sequence & 0xFFFFFFFF, log_time, log_time,
         ) + data
         pending = self._file.log[-1].pending
+        now = time.monotonic()
         if not pending:
-            self._opened = time.monotonic()
+            self._opened = now
         # One C call, which a Python signal handler cannot split: a handler that raises
         # leaves the message either in the buffer or not, never half of it.
         pending.append((log_time, channel, record))
@@ -598,14 +600,13 @@ class BagWriter:
         self._pending_bytes += len(record)
         if self._first_time is None:
             self._first_time = log_time
-            self._first_wall = time.monotonic()
+            self._first_wall = now
         if log_time < self._flushed_until:
             self.late_messages += 1
-        if ((channel in self._sync or channel in self._follow)
-                and log_time > self._latest.get(channel, -1)):
+        if channel in self._watched and log_time > self._latest.get(channel, -1):
             self._latest[channel] = log_time
         if (self._pending_bytes >= self._next_size_flush
-                or time.monotonic() - self._opened >= self._flush_interval):
+                or now - self._opened >= self._flush_interval):
             self._flush_chunk()
 
     def _watermark(self) -> int | None:
@@ -638,12 +639,21 @@ class BagWriter:
         if n == 0:
             return
         taken, rest = pending[:n], pending[n:]
-        raw = b''.join(rec for _, _, rec in taken)
-        index: dict[int, list[int]] = {}
-        at = 0
-        for log_time, channel, rec in taken:
-            index.setdefault(channel, []).extend((log_time, at))
-            at += len(rec)
+        times, channels, records = zip(*taken)
+        raw = b''.join(records)
+        sizes = np.fromiter(map(len, records), np.uint64, n)
+        where = np.zeros(n, np.uint64)
+        np.cumsum(sizes[:-1], out=where[1:])
+        stamps = np.fromiter(times, np.uint64, n)
+        ids = np.fromiter(channels, np.uint16, n)
+        index: dict[int, bytes] = {}
+        counts_list = []
+        for channel_id in np.unique(ids).tolist():
+            sel = ids == channel_id
+            pairs = np.empty((int(sel.sum()), 2), '<u8')
+            pairs[:, 0], pairs[:, 1] = stamps[sel], where[sel]
+            index[channel_id] = pairs.tobytes()
+            counts_list.append((channel_id, len(pairs)))
         start, end = taken[0][0], taken[-1][0]
         compressed = self._compress(raw)
         body = (
@@ -656,10 +666,9 @@ class BagWriter:
         indexes = []
         offsets = []
         at = chunk_start + len(record)
-        for channel_id, pairs in sorted(index.items()):
-            values = array('Q', pairs)
-            rec = _record(0x07, _U16.pack(channel_id) + _U32.pack(8 * len(values))
-                          + values.tobytes())
+        for channel_id, pairs_bytes in sorted(index.items()):
+            rec = _record(0x07, _U16.pack(channel_id) + _U32.pack(len(pairs_bytes))
+                          + pairs_bytes)
             offsets.append(_U16.pack(channel_id) + _U64.pack(at))
             indexes.append(rec)
             at += len(rec)
@@ -671,10 +680,9 @@ class BagWriter:
             + _U64.pack(sum(len(r) for r in indexes)) + _string(self._compression)
             + _U64.pack(len(compressed)) + _U64.pack(len(raw)),
         )
-        counts = tuple((c, len(pairs) // 2) for c, pairs in index.items())
-        commit = _Commit(at, rest, chunk_index, counts, start, end)
+        commit = _Commit(at, rest, chunk_index, tuple(counts_list), start, end)
         self._append(record + b''.join(indexes), commit)
-        self._pending_bytes = sum(len(rec) for _, _, rec in rest)
+        self._pending_bytes -= len(raw)
         self._next_size_flush = self._pending_bytes + self._chunk_size
         self._flushed_until = max(self._flushed_until, end + 1 if cut is None else cut)
         if time.monotonic() - self._last_metadata >= self._metadata_interval:
