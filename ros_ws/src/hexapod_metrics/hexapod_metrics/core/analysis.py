@@ -12,7 +12,6 @@ its changes, i.e. at the recorded switches.
 """
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -106,33 +105,32 @@ class BagAnalysis:
     series: PlotSeries
 
 
-def _header(raw: bytes) -> tuple[int, str]:
-    """(stamp ns, frame_id) of a CDR message that starts with a std_msgs/Header."""
-    sec, nsec, n = struct.unpack_from("<iII", raw, 4)
-    return sec * 1_000_000_000 + nsec, raw[16:16 + max(n - 1, 0)].decode("utf-8", "replace")
-
-
 def controller_changes(bag: Bag, dt_ns: int,
                        online: list[tuple[int, str, Indices]] | None = None
                        ) -> list[tuple[int, str]]:
     """(first tick, controller) at the start and at every change of joint_states' frame_id.
 
-    If ``online`` is given, the /hexapod/indices records met in the same pass are appended
-    to it as (cycle, controller, indices).
+    If ``online`` is given, the bag's /hexapod/indices records are appended to it as
+    (cycle, controller, indices).
     """
-    changes: list[tuple[int, str]] = []
-    current = None
-    wanted = [T.JOINT_STATES] + ([T.INDICES] if online is not None else [])
-    for topic, _, raw in bag.messages(wanted):
-        if topic == T.INDICES:
-            assert online is not None
-            online.extend(_online_records(raw))
-            continue
-        stamp, frame = _header(raw)
-        if frame != current:
-            changes.append((int(round(stamp / dt_ns)), frame or "unknown"))
-            current = frame
-    return changes
+    if online is not None:
+        online.extend(online_indices(bag))
+    frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
+    for _ in iter_joint_state_blocks(bag, [T.JOINT_STATES], frames=frames):
+        pass
+    return ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
+
+
+def ticks_of_changes(frames: list[tuple[int, str]], dt_ns: int) -> list[tuple[int, str]]:
+    """(stamp ns, frame_id) changes -> (tick, controller); an empty frame_id is 'unknown'."""
+    return [(int(round(stamp / dt_ns)), frame or "unknown") for stamp, frame in frames]
+
+
+def online_indices(bag: Bag) -> list[tuple[int, str, Indices]]:
+    """The per-cycle indices the recorder published (/hexapod/indices), in file order."""
+    if T.INDICES not in bag.topics:
+        return []
+    return [r for _, _, raw in bag.messages([T.INDICES]) for r in _online_records(raw)]
 
 
 def label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
@@ -151,9 +149,11 @@ class _Buffer:
 
     def push(self, k: np.ndarray, pos: np.ndarray, vel: np.ndarray, eff: np.ndarray) -> None:
         rows = np.stack([pos, vel, eff], axis=1)
+        joint = self.k[-1:]  # the new ticks must follow the old ones (checked at the seam)
+        ordered = bool(np.all(np.diff(np.concatenate([joint, k])) > 0))
         self.k = np.concatenate([self.k, k])
         self.data = rows if self.data is None else np.concatenate([self.data, rows])
-        if np.any(np.diff(self.k) <= 0):  # out of order or duplicated: sort, keep the first
+        if not ordered:  # out of order or duplicated: sort, keep the first
             self.k, first = np.unique(self.k, return_index=True)
             self.data = self.data[first]
 
@@ -200,8 +200,9 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
-        online: list[tuple[int, str, Indices]] = []
-        changes = controller_changes(bag, dt_ns, online)
+        online = online_indices(bag)
+        frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
+        changes: list[tuple[int, str]] = []  # grows as joint_states are read
         buffers = {t: _Buffer() for t in STREAMS}
         series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
                                        // MAX_PLOT_POINTS))
@@ -246,7 +247,10 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             return CycleResult(c, k0 * dt, k1 * dt, who,
                                sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
-        for topic, arrays in iter_joint_state_blocks(bag, STREAMS):
+        for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames):
+            if frames[T.JOINT_STATES]:
+                changes += ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
+                frames[T.JOINT_STATES].clear()
             k = np.rint(arrays.stamps / dt_ns).astype(np.int64)
             buffers[topic].push(k, arrays.position, arrays.velocity, arrays.effort)
             if topic == T.JOINT_STATES:
@@ -285,4 +289,4 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
 
 
 __all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag", "label_ticks",
-           "controller_changes"]
+           "controller_changes", "online_indices", "ticks_of_changes"]

@@ -616,6 +616,20 @@ def _block_messages(
     if block.indexes is not None and not any(c in block.indexes for c in ids):
         return
     raw = mf.inflate(block)
+    if block.indexes is not None and len(ids) < len(mf.channels):  # a few topics: index
+        found = [(int(o), c) for c in ids if c in block.indexes
+                 for o in (mf.index_offsets(block, c) if c in block.indexes else ())]
+        for pos, channel in sorted(found):
+            if pos + 31 > len(raw) or raw[pos] != 5:
+                msg = f'{mf.what}: message index does not match the chunk records (corrupt)'
+                raise BagReadError(msg)
+            length, got = _U64.unpack_from(raw, pos + 1)[0], _U16.unpack_from(raw, pos + 9)[0]
+            if got != channel or length < 22 or pos + 9 + length > len(raw):
+                msg = f'{mf.what}: message index does not match the chunk records (corrupt)'
+                raise BagReadError(msg)
+            log_time = _U64.unpack_from(raw, pos + 15)[0]
+            yield ids[channel], int(log_time), raw[pos + 31:pos + 9 + length]
+        return
     for channel, pos, length in _records(raw, mf.what):
         if channel in ids:
             log_time = _U64.unpack_from(raw, pos + 15)[0]
@@ -716,12 +730,19 @@ def iter_joint_state_blocks(
     topics: Sequence[str],
     *,
     prefetch: int = 2,
+    frames: dict[str, list[tuple[int, str]]] | None = None,
 ) -> Iterator[tuple[str, JointStateArrays]]:
     """Yield (topic, arrays) chunk by chunk in file order, decoding all ``topics`` in one
     pass. A helper thread reads and decompresses up to ``prefetch`` chunks ahead (the
-    decompressors release the GIL), so memory stays bounded by a few chunks."""
+    decompressors release the GIL), so memory stays bounded by a few chunks.
+
+    ``frames``: for each topic that is a key, the (stamp ns, frame_id) of every message
+    whose header.frame_id differs from the one before it are appended to its list before
+    the block is yielded (vectorised, see :meth:`JointStateDecoder.frame_changes`)."""
     _check_topics(bag, topics)
     decoders = {topic: JointStateDecoder() for topic in topics}
+    for topic, found in (frames or {}).items():
+        decoders[topic].frame_log = found
     for mf in bag.files:
         with _boundary(mf.what):
             ids = {c.id: c.topic for c in mf.channels.values() if c.topic in topics}
@@ -825,14 +846,23 @@ def _decode_records(
     ):
         msg = f'{what}: message index does not match the chunk records (corrupt)'
         raise BagReadError(msg)
-    return decoder.decode(buf, offsets + 31, lengths - 22)
+    arrays = decoder.decode(buf, offsets + 31, lengths - 22)
+    if decoder.frame_log is not None:
+        changes = decoder.frame_changes(buf, offsets + 31, lengths - 22)
+        decoder.frame_log.extend((int(arrays.stamps[i]), frame) for i, frame in changes)
+    return arrays
 
 
 def _slow(decoder: JointStateDecoder, messages: list[bytes]) -> JointStateArrays:
     """Decode messages stored outside chunks."""
     sizes = np.array([len(m) for m in messages], np.int64)
     starts = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.int64)
-    return decoder.decode(np.frombuffer(b''.join(messages), np.uint8), starts, sizes)
+    buf = np.frombuffer(b''.join(messages), np.uint8)
+    arrays = decoder.decode(buf, starts, sizes)
+    if decoder.frame_log is not None:
+        changes = decoder.frame_changes(buf, starts, sizes)
+        decoder.frame_log.extend((int(arrays.stamps[i]), frame) for i, frame in changes)
+    return arrays
 
 
 def read_joint_state_topics(bag: Bag, topics: Sequence[str]) -> dict[str, JointStateArrays]:

@@ -491,6 +491,41 @@ class JointStateDecoder:
         """Start without layouts; they are learnt from the messages."""
         self.layouts: dict[int, JointStateLayout | None] = {}
         self.names: tuple[str, ...] | None = None
+        self.frame: str | None = None  # frame_id of the last message seen by frame_changes
+        self.frame_log: list[tuple[int, str]] | None = None
+        """Where the bag reader appends (stamp ns, frame_id) changes, if anyone asks."""
+
+    def frame_changes(
+        self,
+        buf: npt.NDArray[np.uint8],
+        starts: npt.NDArray[np.int64],
+        sizes: npt.NDArray[np.int64],
+    ) -> list[tuple[int, str]]:
+        """(row, frame_id) of every message whose header.frame_id differs from the message
+        before it (across calls), vectorised: rows whose frame bytes equal the previous
+        row's are skipped with one compare; only candidate rows are decoded."""
+        n = len(starts)
+        if n == 0:
+            return []
+        if int(sizes.min()) < 16:
+            msg = 'JointState shorter than its header'
+            raise BagReadError(msg)
+        lengths = gather_rows(buf, starts + 12, 4).view('<u4')[:, 0].astype(np.int64)
+        width = min(int(lengths.max()), int(sizes.min()) - 16)
+        head = gather_rows(buf, starts + 12, 4 + width)
+        candidates = np.flatnonzero(np.any(head[1:] != head[:-1], axis=1)) + 1
+        out = []
+        for i in (0, *candidates.tolist()):
+            size = int(lengths[i])
+            if 16 + size > int(sizes[i]):
+                msg = f'JointState frame_id of {size} bytes runs past its message'
+                raise BagReadError(msg)
+            at = int(starts[i]) + 16
+            frame = bytes(buf[at:at + max(size - 1, 0)]).decode(errors='replace')
+            if frame != self.frame:
+                out.append((i, frame))
+                self.frame = frame
+        return out
 
     def _layout(self, size: int, message: bytes) -> JointStateLayout | None:
         if size not in self.layouts:
