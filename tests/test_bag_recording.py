@@ -230,3 +230,21 @@ def test_decoder_rejects_what_is_not_padding() -> None:
     with pytest.raises(BagReadError, match="unexpected trailing bytes"):
         cdr.decode_string(data + b"\x01")
 
+
+
+def test_message_definitions_come_from_the_installed_msg_files() -> None:
+    from hexapod_metrics.core import msgdefs
+
+    js = msgdefs.MESSAGE_TYPES["sensor_msgs/msg/JointState"]
+    assert js.definition.startswith(msgdefs._msg_text("sensor_msgs/JointState"))
+    assert [x for x in js.definition.splitlines() if x.startswith("MSG: ")] == [
+        "MSG: std_msgs/Header", "MSG: builtin_interfaces/Time"]
+    marker = msgdefs.MESSAGE_TYPES["visualization_msgs/msg/MarkerArray"].definition
+    order = [x[5:] for x in marker.splitlines() if x.startswith("MSG: ")]
+    assert order[:3] == ["visualization_msgs/Marker", "builtin_interfaces/Duration",
+                         "geometry_msgs/Point"]  # depth first, each level sorted
+    assert order.index("std_msgs/Header") + 1 == order.index("builtin_interfaces/Time")
+    assert msgdefs.lookup("sensor_msgs/JointState") == js
+    assert msgdefs.lookup("no_msgs/msg/Nothing") is None
+    with pytest.raises(msgdefs.MessageDefinitionError, match="no_msgs/msg/Nothing.msg not found"):
+        msgdefs.load("no_msgs/msg/Nothing")

@@ -1,14 +1,22 @@
-"""Embedded ROS 2 Jazzy message definitions (rosbag2 ``ros2msg`` full text) and type hashes.
+"""ROS 2 Jazzy message definitions as rosbag2 stores them (``ros2msg`` full text) and their
+type hashes, read from the installed ``share/<pkg>/msg/<Type>.msg`` and ``.json`` files.
 
-Generated once from the Jazzy ``share/<pkg>/msg/*.msg`` files exactly the way rosbag2's
-``LocalMessageDefinitionSource`` concatenates them: the root ``.msg`` text verbatim (comments
-kept), then each dependency, sorted and depth first, after an 80-character ``=`` line and a
-``MSG: pkg/Type`` line. Hashes are the RIHS01 hashes from the matching ``.json`` files.
-Embedded so that users of the core need no ROS installation.
+The full text is what rosbag2's ``LocalMessageDefinitionSource`` writes: the root ``.msg``
+verbatim (comments kept), then every dependency once, depth first (each type's own
+dependencies sorted by name), each after an 80-character ``=`` line and a ``MSG: pkg/Type`` line. Hashes are
+the RIHS01 hashes of the ``.json`` type descriptions. The files are looked up under this
+interpreter's prefix (where the ROS wheels install them) and every ``AMENT_PREFIX_PATH``
+entry; no rclpy is imported.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import re
+import sys
+from functools import lru_cache
+from pathlib import Path
 from typing import NamedTuple
 
 __all__ = [
@@ -18,7 +26,9 @@ __all__ = [
     'TYPE_JOINT_STATE',
     'TYPE_MARKER_ARRAY',
     'TYPE_STRING',
+    'MessageDefinitionError',
     'MessageType',
+    'load',
     'lookup',
 ]
 
@@ -34,435 +44,102 @@ class MessageType(NamedTuple):
     """RIHS01 type description hash."""
 
 
+class MessageDefinitionError(LookupError):
+    """A message type's ``.msg`` file is not installed where we look."""
+
+
 TYPE_JOINT_STATE = 'sensor_msgs/msg/JointState'
 TYPE_STRING = 'std_msgs/msg/String'
 TYPE_CLOCK = 'rosgraph_msgs/msg/Clock'
 TYPE_DIAGNOSTIC_ARRAY = 'diagnostic_msgs/msg/DiagnosticArray'
 TYPE_MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 
-_DEF_JOINT_STATE = (
-    '# This is a message that holds data to describe the state of a set of torque con'
-    'trolled joints.\n'
-    '#\n'
-    '# The state of each joint (revolute or prismatic) is defined by:\n'
-    '#  * the position of the joint (rad or m),\n'
-    '#  * the velocity of the joint (rad/s or m/s) and\n'
-    '#  * the effort that is applied in the joint (Nm or N).\n'
-    '#\n'
-    '# Each joint is uniquely identified by its name\n'
-    '# The header specifies the time at which the joint states were recorded. All the'
-    ' joint states\n'
-    '# in one message have to be recorded at the same time.\n'
-    '#\n'
-    '# This message consists of a multiple arrays, one for each part of the joint state.\n'
-    '# The goal is to make each of the fields optional. When e.g. your joints have no\n'
-    '# effort associated with them, you can leave the effort array empty.\n'
-    '#\n'
-    '# All arrays in this message should have the same size, or be empty.\n'
-    '# This is the only way to uniquely associate the joint name with the correct\n'
-    '# states.\n'
-    '\n'
-    'std_msgs/Header header\n'
-    '\n'
-    'string[] name\n'
-    'float64[] position\n'
-    'float64[] velocity\n'
-    'float64[] effort\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: std_msgs/Header\n'
-    '# Standard metadata for higher-level stamped data types.\n'
-    '# This is generally used to communicate timestamped data\n'
-    '# in a particular coordinate frame.\n'
-    '\n'
-    '# Two-integer timestamp that is expressed as seconds and nanoseconds.\n'
-    'builtin_interfaces/Time stamp\n'
-    '\n'
-    '# Transform frame with which this data is associated.\n'
-    'string frame_id\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: builtin_interfaces/Time\n'
-    '# This message communicates ROS Time defined here:\n'
-    '# https://design.ros2.org/articles/clock_and_time.html\n'
-    '\n'
-    '# The seconds component, valid over all int32 values.\n'
-    'int32 sec\n'
-    '\n'
-    '# The nanoseconds component, valid in the range [0, 1e9), to be added to the sec'
-    'onds component. \n'
-    '# e.g.\n'
-    '# The time -1.7 seconds is represented as {sec: -2, nanosec: 3e8}\n'
-    '# The time 1.7 seconds is represented as {sec: 1, nanosec: 7e8}\n'
-    'uint32 nanosec\n'
-)
-
-_DEF_STRING = (
-    '# This was originally provided as an example message.\n'
-    '# It is deprecated as of Foxy\n'
-    '# It is recommended to create your own semantically meaningful message.\n'
-    '# However if you would like to continue using this please use the equivalent in '
-    'example_msgs.\n'
-    '\n'
-    'string data\n'
-)
-
-_DEF_CLOCK = (
-    '# This message communicates the current time.\n'
-    '#\n'
-    '# For more information, see https://design.ros2.org/articles/clock_and_time.html.\n'
-    'builtin_interfaces/Time clock\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: builtin_interfaces/Time\n'
-    '# This message communicates ROS Time defined here:\n'
-    '# https://design.ros2.org/articles/clock_and_time.html\n'
-    '\n'
-    '# The seconds component, valid over all int32 values.\n'
-    'int32 sec\n'
-    '\n'
-    '# The nanoseconds component, valid in the range [0, 1e9), to be added to the sec'
-    'onds component. \n'
-    '# e.g.\n'
-    '# The time -1.7 seconds is represented as {sec: -2, nanosec: 3e8}\n'
-    '# The time 1.7 seconds is represented as {sec: 1, nanosec: 7e8}\n'
-    'uint32 nanosec\n'
-)
-
-_DEF_DIAGNOSTIC_ARRAY = (
-    '# This message is used to send diagnostic information about the state of the robot.\n'
-    'std_msgs/Header header # for timestamp\n'
-    'DiagnosticStatus[] status # an array of components being reported on\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: diagnostic_msgs/DiagnosticStatus\n'
-    '# This message holds the status of an individual component of the robot.\n'
-    '\n'
-    '# Possible levels of operations.\n'
-    'byte OK=0\n'
-    'byte WARN=1\n'
-    'byte ERROR=2\n'
-    'byte STALE=3\n'
-    '\n'
-    '# Level of operation enumerated above.\n'
-    'byte level\n'
-    '# A description of the test/component reporting.\n'
-    'string name\n'
-    '# A description of the status.\n'
-    'string message\n'
-    '# A hardware unique string.\n'
-    'string hardware_id\n'
-    '# An array of values associated with the status.\n'
-    'KeyValue[] values\n'
-    '\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: diagnostic_msgs/KeyValue\n'
-    '# What to label this value when viewing.\n'
-    'string key\n'
-    '# A value to track over time.\n'
-    'string value\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: std_msgs/Header\n'
-    '# Standard metadata for higher-level stamped data types.\n'
-    '# This is generally used to communicate timestamped data\n'
-    '# in a particular coordinate frame.\n'
-    '\n'
-    '# Two-integer timestamp that is expressed as seconds and nanoseconds.\n'
-    'builtin_interfaces/Time stamp\n'
-    '\n'
-    '# Transform frame with which this data is associated.\n'
-    'string frame_id\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: builtin_interfaces/Time\n'
-    '# This message communicates ROS Time defined here:\n'
-    '# https://design.ros2.org/articles/clock_and_time.html\n'
-    '\n'
-    '# The seconds component, valid over all int32 values.\n'
-    'int32 sec\n'
-    '\n'
-    '# The nanoseconds component, valid in the range [0, 1e9), to be added to the sec'
-    'onds component. \n'
-    '# e.g.\n'
-    '# The time -1.7 seconds is represented as {sec: -2, nanosec: 3e8}\n'
-    '# The time 1.7 seconds is represented as {sec: 1, nanosec: 7e8}\n'
-    'uint32 nanosec\n'
-)
-
-_DEF_MARKER_ARRAY = (
-    'Marker[] markers\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: visualization_msgs/Marker\n'
-    '# See:\n'
-    '#  - http://www.ros.org/wiki/rviz/DisplayTypes/Marker\n'
-    '#  - http://www.ros.org/wiki/rviz/Tutorials/Markers%3A%20Basic%20Shapes\n'
-    '#\n'
-    '# for more information on using this message with rviz.\n'
-    '\n'
-    'int32 ARROW=0\n'
-    'int32 CUBE=1\n'
-    'int32 SPHERE=2\n'
-    'int32 CYLINDER=3\n'
-    'int32 LINE_STRIP=4\n'
-    'int32 LINE_LIST=5\n'
-    'int32 CUBE_LIST=6\n'
-    'int32 SPHERE_LIST=7\n'
-    'int32 POINTS=8\n'
-    'int32 TEXT_VIEW_FACING=9\n'
-    'int32 MESH_RESOURCE=10\n'
-    'int32 TRIANGLE_LIST=11\n'
-    'int32 ARROW_STRIP=12\n'
-    '\n'
-    'int32 ADD=0\n'
-    'int32 MODIFY=0\n'
-    'int32 DELETE=2\n'
-    'int32 DELETEALL=3\n'
-    '\n'
-    '# Header for timestamp and frame id.\n'
-    'std_msgs/Header header\n'
-    '# Namespace in which to place the object.\n'
-    '# Used in conjunction with id to create a unique name for the object.\n'
-    'string ns\n'
-    '# Object ID used in conjunction with the namespace for manipulating and deleting'
-    ' the object later.\n'
-    'int32 id\n'
-    '# Type of object.\n'
-    'int32 type\n'
-    '# Action to take; one of:\n'
-    '#  - 0 add/modify an object\n'
-    '#  - 1 (deprecated)\n'
-    '#  - 2 deletes an object (with the given ns and id)\n'
-    '#  - 3 deletes all objects (or those with the given ns if any)\n'
-    'int32 action\n'
-    '# Pose of the object with respect the frame_id specified in the header.\n'
-    'geometry_msgs/Pose pose\n'
-    '# Scale of the object; 1,1,1 means default (usually 1 meter square).\n'
-    'geometry_msgs/Vector3 scale\n'
-    '# Color of the object; in the range: [0.0-1.0]\n'
-    'std_msgs/ColorRGBA color\n'
-    '# How long the object should last before being automatically deleted.\n'
-    '# 0 indicates forever.\n'
-    'builtin_interfaces/Duration lifetime\n'
-    '# If this marker should be frame-locked, i.e. retransformed into its frame every'
-    ' timestep.\n'
-    'bool frame_locked\n'
-    '\n'
-    '# Only used if the type specified has some use for them (eg. POINTS, LINE_STRIP,'
-    ' ARROW_STRIP, etc.)\n'
-    'geometry_msgs/Point[] points\n'
-    '# Only used if the type specified has some use for them (eg. POINTS, LINE_STRIP, etc.)\n'
-    '# The number of colors provided must either be 0 or equal to the number of point'
-    's provided.\n'
-    '# NOTE: alpha is not yet used\n'
-    'std_msgs/ColorRGBA[] colors\n'
-    '\n'
-    '# Texture resource is a special URI that can either reference a texture file in\n'
-    '# a format acceptable to (resource retriever)[https://docs.ros.org/en/rolling/p/'
-    'resource_retriever/]\n'
-    '# or an embedded texture via a string matching the format:\n'
-    '#   "embedded://texture_name"\n'
-    'string texture_resource\n'
-    '# An image to be loaded into the rendering engine as the texture for this marker.\n'
-    '# This will be used iff texture_resource is set to embedded.\n'
-    'sensor_msgs/CompressedImage texture\n'
-    '# Location of each vertex within the texture; in the range: [0.0-1.0]\n'
-    'UVCoordinate[] uv_coordinates\n'
-    '\n'
-    '# Only used for text markers\n'
-    'string text\n'
-    '\n'
-    '# Only used for MESH_RESOURCE markers.\n'
-    '# Similar to texture_resource, mesh_resource uses resource retriever to load a mesh.\n'
-    '# Optionally, a mesh file can be sent in-message via the mesh_file field. If doing so,\n'
-    '# use the following format for mesh_resource:\n'
-    '#   "embedded://mesh_name"\n'
-    'string mesh_resource\n'
-    'MeshFile mesh_file\n'
-    'bool mesh_use_embedded_materials\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: builtin_interfaces/Duration\n'
-    '# Duration defines a period between two time points.\n'
-    '# Messages of this datatype are of ROS Time following this design:\n'
-    '# https://design.ros2.org/articles/clock_and_time.html\n'
-    '\n'
-    '# The seconds component, valid over all int32 values.\n'
-    'int32 sec\n'
-    '\n'
-    '# The nanoseconds component, valid in the range [0, 1e9), to be added to the sec'
-    'onds component. \n'
-    '# e.g.\n'
-    '# The duration -1.7 seconds is represented as {sec: -2, nanosec: 3e8}\n'
-    '# The duration 1.7 seconds is represented as {sec: 1, nanosec: 7e8}\n'
-    'uint32 nanosec\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: geometry_msgs/Point\n'
-    '# This contains the position of a point in free space\n'
-    'float64 x\n'
-    'float64 y\n'
-    'float64 z\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: geometry_msgs/Pose\n'
-    '# A representation of pose in free space, composed of position and orientation.\n'
-    '\n'
-    'Point position\n'
-    'Quaternion orientation\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: geometry_msgs/Quaternion\n'
-    '# This represents an orientation in free space in quaternion form.\n'
-    '\n'
-    'float64 x 0\n'
-    'float64 y 0\n'
-    'float64 z 0\n'
-    'float64 w 1\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: geometry_msgs/Vector3\n'
-    '# This represents a vector in free space.\n'
-    '\n'
-    '# This is semantically different than a point.\n'
-    '# A vector is always anchored at the origin.\n'
-    '# When a transform is applied to a vector, only the rotational component is applied.\n'
-    '\n'
-    'float64 x\n'
-    'float64 y\n'
-    'float64 z\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: sensor_msgs/CompressedImage\n'
-    '# This message contains a compressed image.\n'
-    '\n'
-    'std_msgs/Header header # Header timestamp should be acquisition time of image\n'
-    '                             # Header frame_id should be optical frame of camera\n'
-    '                             # origin of frame should be optical center of cameara\n'
-    '                             # +x should point to the right in the image\n'
-    '                             # +y should point down in the image\n'
-    '                             # +z should point into to plane of the image\n'
-    '\n'
-    'string format                # Specifies the format of the data\n'
-    '                             # Acceptable values differ by the image transport used:\n'
-    '                             # - compressed_image_transport:\n'
-    '                             #     ORIG_PIXFMT; CODEC compressed [COMPRESSED_PIXFMT]\n'
-    '                             #   where:\n'
-    '                             #   - ORIG_PIXFMT is pixel format of the raw image, i.e.\n'
-    '                             #     the content of sensor_msgs/Image/encoding with\n'
-    '                             #     values from include/sensor_msgs/image_encodings.h\n'
-    '                             #   - CODEC is one of [jpeg, png, tiff]\n'
-    '                             #   - COMPRESSED_PIXFMT is only appended for color images\n'
-    '                             #     and is the pixel format used by the compression\n'
-    '                             #     algorithm. Valid values for jpeg encoding are:\n'
-    '                             #     [bgr8, rgb8]. Valid values for png encoding are:\n'
-    '                             #     [bgr8, rgb8, bgr16, rgb16].\n'
-    '                             #   If the field is empty or does not correspond to the\n'
-    '                             #   above pattern, the image is treated as bgr8 or mono8\n'
-    '                             #   jpeg image (depending on the number of channels).\n'
-    '                             # - compressed_depth_image_transport:\n'
-    '                             #     ORIG_PIXFMT; compressedDepth CODEC\n'
-    '                             #   where:\n'
-    '                             #   - ORIG_PIXFMT is pixel format of the raw image, i.e.\n'
-    '                             #     the content of sensor_msgs/Image/encoding with\n'
-    '                             #     values from include/sensor_msgs/image_encodings.h\n'
-    '                             #     It is usually one of [16UC1, 32FC1].\n'
-    '                             #   - CODEC is one of [png, rvl]\n'
-    '                             #   If the field is empty or does not correspond to the\n'
-    '                             #   above pattern, the image is treated as png image.\n'
-    '                             # - Other image transports can store whatever values they\n'
-    '                             #   need for successful decoding of the image. Refer to\n'
-    '                             #   documentation of the other transports for details.\n'
-    '\n'
-    'uint8[] data                 # Compressed image buffer\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: std_msgs/Header\n'
-    '# Standard metadata for higher-level stamped data types.\n'
-    '# This is generally used to communicate timestamped data\n'
-    '# in a particular coordinate frame.\n'
-    '\n'
-    '# Two-integer timestamp that is expressed as seconds and nanoseconds.\n'
-    'builtin_interfaces/Time stamp\n'
-    '\n'
-    '# Transform frame with which this data is associated.\n'
-    'string frame_id\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: builtin_interfaces/Time\n'
-    '# This message communicates ROS Time defined here:\n'
-    '# https://design.ros2.org/articles/clock_and_time.html\n'
-    '\n'
-    '# The seconds component, valid over all int32 values.\n'
-    'int32 sec\n'
-    '\n'
-    '# The nanoseconds component, valid in the range [0, 1e9), to be added to the sec'
-    'onds component. \n'
-    '# e.g.\n'
-    '# The time -1.7 seconds is represented as {sec: -2, nanosec: 3e8}\n'
-    '# The time 1.7 seconds is represented as {sec: 1, nanosec: 7e8}\n'
-    'uint32 nanosec\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: std_msgs/ColorRGBA\n'
-    'float32 r\n'
-    'float32 g\n'
-    'float32 b\n'
-    'float32 a\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: visualization_msgs/MeshFile\n'
-    '# Used to send raw mesh files.\n'
-    '\n'
-    '# The filename is used for both debug purposes and to provide a file extension\n'
-    '# for whatever parser is used.\n'
-    'string filename\n'
-    '\n'
-    '# This stores the raw text of the mesh file.\n'
-    'uint8[] data\n'
-    '\n'
-    '================================================================================\n'
-    'MSG: visualization_msgs/UVCoordinate\n'
-    '# Location of the pixel as a ratio of the width of a 2D texture.\n'
-    '# Values should be in range: [0.0-1.0].\n'
-    'float32 u\n'
-    'float32 v\n'
-)
-
-MESSAGE_TYPES: dict[str, MessageType] = {
-    TYPE_JOINT_STATE: MessageType(
-        TYPE_JOINT_STATE,
-        _DEF_JOINT_STATE,
-        'RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e',
-    ),
-    TYPE_STRING: MessageType(
-        TYPE_STRING,
-        _DEF_STRING,
-        'RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18',
-    ),
-    TYPE_CLOCK: MessageType(
-        TYPE_CLOCK,
-        _DEF_CLOCK,
-        'RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564',
-    ),
-    TYPE_DIAGNOSTIC_ARRAY: MessageType(
-        TYPE_DIAGNOSTIC_ARRAY,
-        _DEF_DIAGNOSTIC_ARRAY,
-        'RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e',
-    ),
-    TYPE_MARKER_ARRAY: MessageType(
-        TYPE_MARKER_ARRAY,
-        _DEF_MARKER_ARRAY,
-        'RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf',
-    ),
+_PRIMITIVES = {
+    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
+    'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring',
 }
+_SEPARATOR = '=' * 80
+
+
+def _share_dirs() -> list[Path]:
+    prefixes = [sys.prefix, *os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)]
+    return [Path(p) / 'share' for p in dict.fromkeys(prefixes) if p]
+
+
+def _file(pkg: str, name: str, suffix: str) -> Path:
+    for share in _share_dirs():
+        path = share / pkg / 'msg' / f'{name}{suffix}'
+        if path.is_file():
+            return path
+    where = ', '.join(str(s) for s in _share_dirs())
+    msg = (f'message definition {pkg}/msg/{name}{suffix} not found under {where}: install '
+           'the ROS 2 message wheels (scripts/setup.sh) or set AMENT_PREFIX_PATH')
+    raise MessageDefinitionError(msg)
+
+
+def _field_types(text: str, pkg: str) -> list[str]:
+    """``pkg/Type`` of every non-primitive field of a ``.msg`` text (constants skipped)."""
+    out = []
+    for line in text.splitlines():
+        words = line.split('#', 1)[0].split()
+        if len(words) < 2 or '=' in words[1] or (len(words) > 2 and words[2].startswith('=')):
+            continue
+        base = re.sub(r'<=\d+$', '', re.sub(r'\[.*\]$', '', words[0]))
+        if base in _PRIMITIVES:
+            continue
+        if '/' in base:
+            dep_pkg, dep = base.split('/')[0], base.rsplit('/', 1)[1]
+        elif base == 'Header':
+            dep_pkg, dep = 'std_msgs', 'Header'
+        else:
+            dep_pkg, dep = pkg, base
+        out.append(f'{dep_pkg}/{dep}')
+    return out
+
+
+@lru_cache(maxsize=64)
+def _msg_text(full: str) -> str:
+    pkg, _, name = full.partition('/')
+    return _file(pkg, name, '.msg').read_text(encoding='utf-8')
+
+
+@lru_cache(maxsize=64)
+def load(msgtype: str) -> MessageType:
+    """The definition and hash of ``pkg/msg/Type`` from the installed files."""
+    pkg, _, name = msgtype.replace('/msg/', '/').partition('/')
+    root = f'{pkg}/{name}'
+    seen: list[str] = []
+
+    def visit(full: str) -> None:
+        for dep in sorted(set(_field_types(_msg_text(full), full.split('/')[0]))):
+            if dep not in seen and dep != root:
+                seen.append(dep)
+                visit(dep)
+
+    visit(root)
+    parts = [_msg_text(root)]
+    parts += [f'{_SEPARATOR}\nMSG: {dep}\n{_msg_text(dep)}' for dep in seen]
+    description = json.loads(_file(pkg, name, '.json').read_text(encoding='utf-8'))
+    full_name = f'{pkg}/msg/{name}'
+    hashes = {h['type_name']: h['hash_string'] for h in description['type_hashes']}
+    return MessageType(full_name, '\n'.join(parts), hashes[full_name])
 
 
 def lookup(msgtype: str) -> MessageType | None:
-    """Return the embedded type for ``pkg/msg/Type`` or ``pkg/Type``; ``None`` if unknown."""
+    """The type ``pkg/msg/Type`` or ``pkg/Type`` (installed files); None if unknown."""
     parts = msgtype.split('/')
     if len(parts) == 2:
         msgtype = f'{parts[0]}/msg/{parts[1]}'
-    return MESSAGE_TYPES.get(msgtype)
+    if len(msgtype.split('/')) != 3:
+        return None
+    try:
+        return load(msgtype)
+    except MessageDefinitionError:
+        return None
+
+
+MESSAGE_TYPES: dict[str, MessageType] = {
+    t: load(t) for t in (TYPE_JOINT_STATE, TYPE_STRING, TYPE_CLOCK, TYPE_DIAGNOSTIC_ARRAY,
+                         TYPE_MARKER_ARRAY)
+}
+"""The types this project records."""
