@@ -70,13 +70,14 @@ def write_bag(path: Path, n: int, compression: str) -> float:
 
 
 def write_graph_bag(path: Path, seconds: float) -> int:
-    """A graph-format bag of a ``seconds`` run (PD-P&F, switch to PD-P halfway)."""
+    """A graph-format bag of a ``seconds`` run at 1 kHz control (PD-P&F, switch to PD-P
+    halfway)."""
     from hexapod_control.core.closed_loop import run
     from hexapod_metrics.core.bag_reader import open_bag
     from hexapod_metrics.core.recording import write_run_bag
     from hexapod_sim.core.params import load_params
 
-    p = load_params()
+    p = load_params(**{'sim.dt': 1e-4, 'sim.control_period': 1e-3})  # 1 kHz, as the graph
     write_run_bag(run(p, 'pd_pf', seconds, switches=[(seconds / 2, 'pd_p')]), path)
     with open_bag(path) as bag:
         return bag.message_count

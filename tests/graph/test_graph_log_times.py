@@ -28,12 +28,13 @@ def _stamp(msg) -> int:
 def graph_bag(tmp_path_factory):
     from hexapod_metrics.cmd_graph import GraphProcesses
 
-    from .conftest import STOP_ORDER, next_domain_id
+    from .conftest import FAST_TIMING, STOP_ORDER, next_domain_id
 
     tmp = tmp_path_factory.mktemp("logtimes")
     bag = tmp / "bag"
     g = GraphProcesses(tmp / "logs", env={"ROS_DOMAIN_ID": str(next_domain_id()),
-                                          "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+                                          "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
+                       overrides=FAST_TIMING)  # 1 kHz control: 1 ms ticks
     try:
         g.start("metrics", f"bag_path:={bag}")
         for name in ("trajectory_generator", "pd_p_controller", "pd_pf_controller",
