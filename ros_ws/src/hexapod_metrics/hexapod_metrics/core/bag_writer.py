@@ -14,7 +14,7 @@ Layout:
   ``reorder_window_ns``: every chunk covers the same log-time span for every tick topic,
   and chunks follow each other in log-time order. A tick topic more than ``max_lag_ns``
   behind the others (a dead publisher) stops holding the watermark; one never seen holds
-  it for ``unseen_wait_s`` (wall s) after the first message. A message older than
+  it for ``unseen_wait_s`` (wall s) after the first tick-topic message. A message older than
   the last watermark still goes into the next chunk and is counted in
   :attr:`BagWriter.late_messages` (the summary indexes it, so indexed readers still order).
 
@@ -304,7 +304,7 @@ class BagWriter:
         self._watched: set[int] = set()
         self._latest: dict[int, int] = {}  # sync channel -> newest log time written
         self._first_time: int | None = None
-        self._first_wall = 0.0
+        self._first_wall: float | None = None
         self._unseen_wait = float(unseen_wait_s)
         self._flushed_until = -1  # every chunk so far took the messages below this
         self._opened = 0.0  # wall time of the last flush (attempt)
@@ -600,10 +600,11 @@ class BagWriter:
         self._pending_bytes += len(record)
         if self._first_time is None:
             self._first_time = log_time
-            self._first_wall = now
         if log_time < self._flushed_until:
             self.late_messages += 1
         if channel in self._watched and log_time > self._latest.get(channel, -1):
+            if self._first_wall is None and channel in self._sync:
+                self._first_wall = now  # the wait for unseen tick topics starts here
             self._latest[channel] = log_time
         if (self._pending_bytes >= self._next_size_flush
                 or now - self._opened >= self._flush_interval):
@@ -620,7 +621,8 @@ class BagWriter:
         live = [t for t in latest if leader - t <= self._max_lag]
         cut = min(live) - self._window
         if (len(self._sync - self._latest.keys())
-                and time.monotonic() - self._first_wall < self._unseen_wait):
+                and (self._first_wall is None
+                     or time.monotonic() - self._first_wall < self._unseen_wait)):
             cut = -1  # a tick topic not seen yet: wait for it (a while) before the 1st chunk
         if self._pending_bytes > self._max_pending:  # never hold more than this
             cut = max(cut, leader - self._window)

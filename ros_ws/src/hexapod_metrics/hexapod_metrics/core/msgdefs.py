@@ -3,10 +3,10 @@ type hashes, read from the installed ``share/<pkg>/msg/<Type>.msg`` and ``.json`
 
 The full text is what rosbag2's ``LocalMessageDefinitionSource`` writes: the root ``.msg``
 verbatim (comments kept), then every dependency once, depth first (each type's own
-dependencies sorted by name), each after an 80-character ``=`` line and a ``MSG: pkg/Type`` line. Hashes are
-the RIHS01 hashes of the ``.json`` type descriptions. The files are looked up under this
-interpreter's prefix (where the ROS wheels install them) and every ``AMENT_PREFIX_PATH``
-entry; no rclpy is imported.
+dependencies sorted by name), each after an 80-character ``=`` line and a ``MSG: pkg/Type``
+line. Hashes are the RIHS01 hashes of the ``.json`` type descriptions. The files are looked
+up under this interpreter's prefix (where the ROS wheels install them) and every
+``AMENT_PREFIX_PATH`` entry; no rclpy is imported.
 """
 
 from __future__ import annotations

@@ -119,5 +119,5 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["PARAMS_KEY", "TICK_TOPICS", "TOPICS", "bag_custom_data", "indices_status", "params_from_custom_data",
-           "status_indices", "write_run_bag"]
+__all__ = ["PARAMS_KEY", "TICK_TOPICS", "TOPICS", "bag_custom_data", "indices_status",
+           "params_from_custom_data", "status_indices", "write_run_bag"]
