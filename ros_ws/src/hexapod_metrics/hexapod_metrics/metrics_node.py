@@ -35,18 +35,21 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
 from .core.bag_writer import BagWriter
 from .core.errors import BagError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
-from .core.recording import TOPICS, bag_custom_data, indices_status
+from .core.recording import TOPICS, ParamRecorder, indices_status
 
 #: The state topics a cycle's indices need, all stamped per tick.
 CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
@@ -160,8 +163,10 @@ class MetricsNode(Node):
                                    "s between two takes of the queued messages")
         self.period = p.sim.control_period
         self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
-        self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"))
+        self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"})
         self.writer.open()
+        self.params_log = ParamRecorder(self.writer)
+        self.bad_param_records = 0
         for topic, (msgtype, _) in TOPICS.items():
             self.writer.add_topic(topic, msgtype, C.TOPIC_QOS[topic].preset)
         self.clock_ns = 0
@@ -174,6 +179,7 @@ class MetricsNode(Node):
                 continue
             self._subscribe(topic)
         self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
+        self.announcer = ParamAnnouncer(self, self.period, lambda: self.scorer.latest + 1)
         self.log.info(f"recording to {self.bag_path}")
 
     def _subscribe(self, topic: str) -> None:
@@ -194,6 +200,8 @@ class MetricsNode(Node):
             def cb(data: bytes, topic: str = topic) -> None:
                 self.writer.write(topic, self.clock_ns, data)
                 self.counts[topic] += 1
+        elif topic == T.PARAMETERS:
+            cb = self._on_param_record
         elif topic == T.ACTIVE_CONTROLLER:
             def cb(data: bytes, topic: str = topic) -> None:
                 self.writer.write(topic, self.clock_ns, data)
@@ -205,6 +213,24 @@ class MetricsNode(Node):
                 self.writer.write(topic, C.decode_stamp(data), data)
                 self.counts[topic] += 1
         self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
+
+    def _on_param_record(self, data: bytes) -> None:
+        """A node's parameter record: into the bag (message, MCAP metadata, mirror)."""
+        self.counts[T.PARAMETERS] += 1
+        try:
+            msg = deserialize_message(data, DiagnosticArray)
+            recs = [ParamRecord.from_map(st.values, f"parameter record '{st.name}'")
+                    for st in C.statuses(msg) if st.name.startswith(RECORD_NAME + "/")]
+        except Exception as err:  # noqa: BLE001 - anything undecodable is dropped, counted
+            self.bad_param_records += 1
+            self.log.warning(f"dropped a {T.PARAMETERS} message ({self.bad_param_records} so "
+                             f"far): {str(err).splitlines()[0] if str(err) else err!r}")
+            return
+        for rec in recs:
+            if self.params_log.add(rec, data if len(recs) == 1 else None):
+                what = "start values" if rec.kind == "start" else \
+                    ", ".join(f"{k} = {v!r}" for k, v in rec.values.items())
+                self.log.info(f"parameters of {rec.node} at tick {rec.tick}: {what}")
 
     def _publish_cycle(self, cycle: dict[str, Any]) -> None:
         prev = self.scorer.cycles[-1] if self.scorer.cycles else None

@@ -223,6 +223,7 @@ class BagWriter:
         self._schemas: dict[str, tuple[int, bytes]] = {}
         self._summary_schemas: list[bytes] = []
         self._summary_channels: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []  # Metadata Index records of add_metadata
         self._chunk = _Chunk()
         self._last_metadata = 0.0
 
@@ -329,6 +330,27 @@ class BagWriter:
             self._summary_channels.append(channel)
             self._topics[name] = _Topic(name, msgtype, channel_id, profiles, type_hash)
             self._write_metadata()
+
+    def add_metadata(self, name: str, items: Mapping[str, str]) -> None:
+        """Write an MCAP Metadata record now (data section) and index it in the summary.
+
+        It is on disk when this returns, so a writer killed later still leaves it to
+        readers that scan the file.
+        """
+        with self._lock:
+            self._check_open()
+            at = self._end
+            record = _record(0x0C, _string(name) + _string_map(items))
+            self._append(record)
+            self._metadata_indexes.append(_record(
+                0x0D, _U64.pack(at) + _U64.pack(len(record)) + _string(name)))
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set one ``custom_data`` entry of ``metadata.yaml`` and rewrite it now."""
+        with self._lock:
+            self._custom[key] = value
+            if self._fd is not None:
+                self._write_metadata()
 
     def write(self, topic: str, timestamp_ns: int, data: bytes | bytearray | memoryview) -> None:
         """Append one serialized (CDR) message received at ``timestamp_ns`` (log time)."""
@@ -571,8 +593,9 @@ class BagWriter:
             (0x03, b''.join(self._summary_schemas)),
             (0x04, b''.join(self._summary_channels)),
             (0x08, b''.join(c.chunk_index for c in self._log)),
-            (0x0D, _record(0x0D, _U64.pack(metadata_start) + _U64.pack(len(metadata))
-                           + _string('rosbag2'))),
+            (0x0D, b''.join(self._metadata_indexes) + _record(
+                0x0D, _U64.pack(metadata_start) + _U64.pack(len(metadata))
+                + _string('rosbag2'))),
             (0x0B, self._statistics()),
         ]
         summary = b''
