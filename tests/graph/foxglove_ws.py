@@ -43,8 +43,10 @@ def collect(url: str, topic: str, count: int, timeout: float = 60.0
                             ws.send(json.dumps({"op": "subscribe", "subscriptions": [
                                 {"id": 1, "channelId": ch["id"]}]}))
                 continue
+            if frame[0] != 1:  # 2 = Time (the server's clock), others we do not ask for
+                continue
             opcode, sub, log_time = _DATA.unpack_from(frame)
-            if opcode == 1 and sub == 1:
+            if sub == 1:
                 out.append((log_time, bytes(frame[_DATA.size:])))
     assert channel is not None
     return info, channel, out
