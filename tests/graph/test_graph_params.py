@@ -57,6 +57,21 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
     g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
             f"wait_for:={NODES}")
     with ros_client(g.domain_id) as node:
+        _wait_sim_time(node, 0.5)
+        # Hostile input first: a record that fails its checksum, and bytes that do not decode.
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from hexapod_sim import conversions as C
+        from hexapod_sim.core.param_log import ParamRecord
+
+        forged = ParamRecord("hexapod_sim", "change", 600, 600_000_000, {"ground.scale": 9.0})
+        bad = dict(forged.to_map(), sha256="0" * 64)
+        pub = node.create_publisher(DiagnosticArray, T.PARAMETERS,
+                                    C.TOPIC_QOS[T.PARAMETERS].publisher())
+        pub.publish(C.diagnostic_array(600_000_000, [C.Status(
+            "hexapod_parameters/hexapod_sim", "ok", "change", bad)]))
+        pub.publish(b"\x00\x01\x00\x00garbage")
+        g.wait_log("metrics", "dropped a /hexapod/parameters message (2 so far)", 60)
         _wait_sim_time(node, 1.0)
         value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0)
         req = SetParameters.Request(parameters=[Parameter(name="ground.scale", value=value)])
@@ -79,6 +94,10 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
     k = change[0].tick
     assert 1000 <= k < 4000 and change[0].stamp_ns == k * 1_000_000
     assert json.loads(custom[RECORDS_KEY]) == [r.to_map() for r in records]
+
+    report = json.loads((bag / "indices.json").read_text())
+    assert report["dropped_parameter_messages"] == 2
+    assert report["parameter_records"] == len(records)
 
     # analyze applies it at its tick: segments split there, the later ones name it.
     a = analyze_bag(bag)

@@ -26,6 +26,7 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import declare_node_param
 
 from .core.msgdefs import lookup
@@ -80,6 +81,7 @@ class FoxgloveBridge(Node):
             q = C.TOPIC_QOS[topic]
             self.loop.subscribe(q.msg_type, topic, self._forwarder(topic),
                                 q.subscriber(C.RECORD_DEPTH))
+        self.announcer = ParamAnnouncer(self, 1e-3)  # its own parameters, at tick 0
         self.log.info(f"Foxglove WebSocket server on ws://{host}:{self.port} "
                       f"({len(self.channels)} topics)")
 

@@ -261,7 +261,9 @@ class MetricsNode(Node):
             self.loop.drain()
         finally:
             self.writer.close()
-        report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report()}
+        report = {"bag": str(self.bag_path), "messages": self.counts,
+                  "dropped_parameter_messages": self.bad_param_records,
+                  "parameter_records": len(self.params_log.records), **self.scorer.report()}
         (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
         self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "

@@ -29,6 +29,8 @@ from .controllers import control_law, controller_code, gain_vector
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
+#: Parameter groups a run can change at a tick (those the model vector and gains hold).
+CHANGEABLE = ("ground.", "actuator.", "pd_p.", "pd_pf.")
 
 
 @njit(cache=True)
@@ -133,6 +135,11 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
         controller_code(c)
     changes = sorted(((int(math.ceil(ts / p.sim.control_period - 1e-9)), dict(v))
                       for ts, v in param_changes), key=lambda c: c[0])
+    for _, values in changes:
+        for name, value in values.items():
+            if not name.startswith(CHANGEABLE):
+                raise ParameterError(name, value, "a change during a run only of "
+                                     + ", ".join(g + "*" for g in CHANGEABLE))
     params_at = [(0, p)]
     for k, values in changes:
         params_at.append((k, params_at[-1][1].with_values(**values)))
@@ -228,5 +235,5 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
 
 
-__all__ = ["BLOCK_TICKS", "BatchResult", "Case", "RunResult", "run", "run_batch", "run_ticks",
-           "shared_reference_key", "tick_count"]
+__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "run", "run_batch",
+           "run_ticks", "shared_reference_key", "tick_count"]
