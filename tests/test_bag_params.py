@@ -163,3 +163,28 @@ def test_a_bag_without_records_says_it_uses_the_defaults(tmp_path):
         got = bag_params(b)
     assert got.source == DEFAULTS and got.timeline is None
     assert set(json.loads(json.dumps(sorted(SPECS)))) == set(SPECS)
+
+
+def test_the_engine_changes_only_what_a_run_can_change():
+    from hexapod_sim.core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="gait.velocity.*only of ground"):
+        run(load_params(), "pd_pf", 1.0, param_changes=[(0.5, {"gait.velocity": 2.0})])
+    with pytest.raises(ParameterError, match="ground.scale"):
+        run(load_params(), "pd_pf", 1.0, param_changes=[(0.5, {"ground.scale": -1.0})])
+
+
+def test_simulate_change_writes_the_change_into_its_bag(tmp_path):
+    bag = tmp_path / "bag"
+    out = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "simulate",
+                          "--controller", "pd_pf", "--change", "1.5:ground.scale=2.0",
+                          "--bag", str(bag), "--json"], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    a = analyze_bag(bag)
+    assert a.param_changes == [(1.5, "hexapod simulate", "ground.scale", 2.0)]
+    bad = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "simulate",
+                          "--change", "ground.scale"], capture_output=True, text=True,
+                         timeout=300)
+    assert bad.returncode == 2 and "TIME:NAME=VALUE" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1

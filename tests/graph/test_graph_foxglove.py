@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from hexapod_metrics.core.bag_params import read_records
 from hexapod_metrics.core.bag_reader import open_bag
 from hexapod_metrics.core.msgdefs import lookup
 from hexapod_metrics.foxglove_layout import LAYOUT_FILE, layout_topics
@@ -72,6 +73,10 @@ def test_a_websocket_client_decodes_live_joint_states_and_the_bag_has_the_layout
         recorded = {t: raw for _, t, raw in b.messages([T.JOINT_STATES])}
         topics = set(b.topics)
         counts = {name: info.message_count for name, info in b.topics.items()}
+        starts = {r.node for r in read_records(b) if r.kind == "start"}
+    # Every node that owns parameters left its start values in the bag.
+    assert starts == {"hexapod_sim", "trajectory_generator", "pd_pf_controller", "metrics",
+                      "markers", "foxglove_bridge"}
     for log_time, payload in frames:
         assert recorded[log_time] == payload
     read, _ = layout_topics(json.loads((ROOT / LAYOUT_FILE).read_text(encoding="utf-8")))
