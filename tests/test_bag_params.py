@@ -154,6 +154,18 @@ def test_rosbags_reads_a_bag_with_parameter_records(changed_bag):
     assert rec.kind == "change" and rec.tick == 1500 and rec.values == {"ground.scale": 2.0}
 
 
+def test_the_mcap_library_finds_the_records_through_the_summary(changed_bag):
+    from mcap.reader import make_reader
+
+    bag, _ = changed_bag
+    with open(next(Path(bag).glob("*.mcap")), "rb") as fh:
+        reader = make_reader(fh)
+        found = [(m.name, m.metadata) for m in reader.iter_metadata()]
+    records = [ParamRecord.from_map(m) for name, m in found if name == "hexapod_parameters"]
+    assert [(r.kind, r.tick) for r in records] == [("start", 0), ("change", 1500)]
+    assert [name for name, _ in found].count("rosbag2") == 1
+
+
 def test_a_bag_without_records_says_it_uses_the_defaults(tmp_path):
     from hexapod_metrics.core.bag_writer import BagWriter
 
