@@ -5,7 +5,10 @@ way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCA
 (:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
-transient-local) and every parameter in the bag's ``custom_data``. The log time of a
+transient-local). Parameters: every node's records from ``/hexapod/parameters`` (start
+values, and each runtime change with its tick) go into the MCAP as checksummed Metadata
+records and into ``metadata.yaml``'s ``custom_data`` (core/recording.py
+``ParamRecorder``); undecodable ones are dropped, counted and logged. The log time of a
 message is its stamp (simulated time); messages without a stamp of their own (the active
 controller, the markers) get the latest ``/clock``. The node takes its messages in
 batches (``batch_interval``, default 5 ms) so that it does not compete with the control
