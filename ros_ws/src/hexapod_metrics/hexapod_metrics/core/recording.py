@@ -45,13 +45,8 @@ TOPICS: dict[str, tuple[str, str]] = {
 }
 
 
-def bag_custom_data(p: HexapodParams, source: str) -> dict[str, str]:
-    """metadata.yaml custom_data of our bags: who wrote it and every parameter (JSON)."""
-    return {"source": source, PARAMS_KEY: json.dumps(p.to_flat())}
-
-
 def params_from_custom_data(custom: dict[str, str] | None) -> HexapodParams | None:
-    """The parameters recorded in a bag's custom_data, or None if it has none."""
+    """The parameters in a bag's custom_data (older bags, without MCAP records), or None."""
     if not custom or PARAMS_KEY not in custom:
         return None
     return from_flat(json.loads(custom[PARAMS_KEY]))
@@ -173,5 +168,5 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
 
 
 __all__ = ["PARAMS_KEY", "RECORDS_KEY", "SIMULATE_NODE", "SIM_NODE", "TOPICS", "ParamRecorder",
-           "param_status", "bag_custom_data", "indices_status", "params_from_custom_data",
+           "param_status", "indices_status", "params_from_custom_data",
            "status_indices", "write_run_bag"]
