@@ -18,7 +18,9 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core.param_log import ParamRecord, ParamRecordError, timeline
 from hexapod_sim.core.params import SPECS, load_params
 
-SLOW = {"gait.velocity": 0.8}  # T = 1.25 s: wrong defaults would cut cycles elsewhere
+#: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
+FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
+SLOW = {"gait.velocity": 0.8, **FAST}  # T = 1.25 s: wrong defaults would cut cycles elsewhere
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +32,7 @@ def slow_bag(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def changed_bag(tmp_path_factory):
-    p = load_params()
+    p = load_params(**FAST)
     r = run(p, "pd_pf", 3.0, param_changes=[(1.5, {"ground.scale": 2.0})])
     return write_run_bag(r, tmp_path_factory.mktemp("bags") / "changed"), r
 
@@ -135,7 +137,7 @@ def test_a_change_is_recorded_and_applied_at_its_tick(changed_bag):
         ref = indices_from_obs(r.obs[sl], r.reference.hip[sl], r.reference.foot[sl], 1e-3)
         assert c.indices.eps_xH == pytest.approx(ref.eps_xH, rel=1e-12)
     # The change acts: the run differs from an unchanged one only from its tick on.
-    base = run(load_params(), "pd_pf", 3.0)
+    base = run(load_params(**FAST), "pd_pf", 3.0)
     assert (base.obs[:1500] == r.obs[:1500]).all() and (base.obs[1500] != r.obs[1500]).any()
     with open_bag(bag) as b:
         assert b.topics[T.PARAMETERS].message_count == 2
@@ -180,16 +182,18 @@ def test_a_bag_without_records_says_it_uses_the_defaults(tmp_path):
 def test_the_engine_changes_only_what_a_run_can_change():
     from hexapod_sim.core.errors import ParameterError
 
+    p = load_params(**FAST)
     with pytest.raises(ParameterError, match="gait.velocity.*only of ground"):
-        run(load_params(), "pd_pf", 1.0, param_changes=[(0.5, {"gait.velocity": 2.0})])
+        run(p, "pd_pf", 1.0, param_changes=[(0.5, {"gait.velocity": 2.0})])
     with pytest.raises(ParameterError, match="ground.scale"):
-        run(load_params(), "pd_pf", 1.0, param_changes=[(0.5, {"ground.scale": -1.0})])
+        run(p, "pd_pf", 1.0, param_changes=[(0.5, {"ground.scale": -1.0})])
 
 
 def test_simulate_change_writes_the_change_into_its_bag(tmp_path):
     bag = tmp_path / "bag"
     out = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "simulate",
                           "--controller", "pd_pf", "--change", "1.5:ground.scale=2.0",
+                          "--set", "sim.dt=0.0001", "--set", "sim.control_period=0.001",
                           "--bag", str(bag), "--json"], capture_output=True, text=True,
                          timeout=300)
     assert out.returncode == 0, out.stderr

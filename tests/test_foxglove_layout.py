@@ -35,6 +35,7 @@ def test_an_in_process_bag_has_every_topic_the_plots_read(tmp_path):
 
     doc = json.loads((ROOT / LAYOUT_FILE).read_text(encoding="utf-8"))
     read, _ = layout_topics(doc)
-    bag = write_run_bag(run(load_params(), "pd_pf", 1.0), tmp_path / "bag")
+    p = load_params(**{"sim.dt": 1e-4, "sim.control_period": 1e-3})  # small and quick
+    bag = write_run_bag(run(p, "pd_pf", 1.0), tmp_path / "bag")
     with open_bag(bag) as b:
         assert read - {T.MARKERS, T.STATUS} <= set(b.topics)

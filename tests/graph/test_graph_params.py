@@ -16,9 +16,8 @@ from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
 from hexapod_metrics.core.recording import RECORDS_KEY
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import O_TH, O_TQ
-from hexapod_sim.core.params import load_params
 
-from .conftest import call, ros_client, sim_summary
+from .conftest import call, fast_params, ros_client, sim_summary
 
 DURATION = 4.0
 NODES = "trajectory_generator,pd_pf_controller,metrics"
@@ -107,7 +106,7 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
     assert a.segments[-1].t_start == pytest.approx(k * 1e-3)
 
     # The engine with the same change at the same tick gives the same samples and indices.
-    r = run(load_params(), "pd_pf", DURATION, param_changes=[(k * 1e-3, {"ground.scale": 2.0})])
+    r = run(fast_params(), "pd_pf", DURATION, param_changes=[(k * 1e-3, {"ground.scale": 2.0})])
     n = r.obs.shape[0]
     assert np.array_equal(js.stamps, np.arange(n) * 1_000_000)
     np.testing.assert_allclose(js.effort.reshape(-1, 6, 2), r.obs[:, O_TQ], rtol=0, atol=1e-9)
@@ -119,5 +118,5 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
         for name in INDEX_NAMES:
             assert getattr(c.indices, name) == pytest.approx(getattr(ref, name), rel=1e-12)
     # ... and differs from a run without it (the change acted).
-    base = run(load_params(), "pd_pf", DURATION)
+    base = run(fast_params(), "pd_pf", DURATION)
     assert not np.allclose(base.obs[k + 10:], r.obs[k + 10:])
