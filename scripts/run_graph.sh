@@ -21,6 +21,9 @@
 #                            it: they work on the messages' stamps; costs ~10 % of speed)
 #   --markers                also run the markers node: /hexapod/markers (MarkerArray at
 #                            30 Hz of sim time) lands in the bag for Foxglove's 3-D panel
+#   --foxglove [PORT]        serve the graph's topics live to Foxglove on
+#                            ws://localhost:PORT (default 8765); implies --markers;
+#                            layout: docs/foxglove/hexapod_layout.json
 #   -h, --help               this text
 # Environment: ROS_DOMAIN_ID is honoured; discovery stays on this machine unless
 # ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise. While it runs, switch controllers with
@@ -29,7 +32,7 @@ set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 controller=pd_pf switch_to="" switch_at="" no_switch=0 mode=lockstep duration=6
-ground_scale="" t_max="" params="" bag="" sim_time=0 markers=0
+ground_scale="" t_max="" params="" bag="" sim_time=0 markers=0 foxglove=""
 
 die() { echo "run_graph: error: $*" >&2; exit 2; }
 need() { [[ $# -ge 2 && -n "$2" ]] || die "option $1 needs a value"; }
@@ -47,7 +50,10 @@ while [[ $# -gt 0 ]]; do
     --bag) need "$@"; bag="$2"; shift 2 ;;
     --sim-time) sim_time=1; shift ;;
     --markers) markers=1; shift ;;
-    -h|--help) sed -n '2,27p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --foxglove)
+      markers=1 foxglove=8765; shift
+      if [[ $# -gt 0 && "$1" =~ ^[0-9]+$ ]]; then foxglove="$1"; shift; fi ;;
+    -h|--help) sed -n '2,30p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (try --help)" ;;
   esac
 done
@@ -123,10 +129,12 @@ cleanup() {
   trap - INT TERM
   stop hexapod_sim 10
   # The others together (SIGINT to all first), the recorder last: it drains its queues.
-  for n in trajectory_generator pd_p_controller pd_pf_controller markers; do
+  for n in trajectory_generator pd_p_controller pd_pf_controller markers foxglove_bridge; do
     [[ -n "${pids[$n]:-}" ]] && kill -s INT "${pids[$n]}" 2>/dev/null || true
   done
-  for n in trajectory_generator pd_p_controller pd_pf_controller markers; do stop "$n" 5; done
+  for n in trajectory_generator pd_p_controller pd_pf_controller markers foxglove_bridge; do
+    stop "$n" 5
+  done
   stop metrics 30
 }
 trap 'cleanup' EXIT
@@ -144,6 +152,10 @@ if (( markers )); then
   start markers hexapod_metrics.marker_node main 0 "${sim_time_arg[@]}"
   # tick 0 waits for the markers node too, so the markers cover the run from t = 0
   sim_extra+=(-p "wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller,metrics,markers")
+fi
+if [[ -n "$foxglove" ]]; then
+  start foxglove_bridge hexapod_metrics.foxglove_node main 10 -p "port:=$foxglove"
+  echo "run_graph: Foxglove live view on ws://localhost:$foxglove (layout: docs/foxglove/hexapod_layout.json)"
 fi
 start hexapod_sim hexapod_sim.sim_node main 0 "${sim_extra[@]}"
 

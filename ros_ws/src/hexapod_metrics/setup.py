@@ -22,6 +22,7 @@ setup(
             'metrics = hexapod_metrics.metrics_node:main',
             'hexapod = hexapod_metrics.cli:main',
             'markers = hexapod_metrics.marker_node:main',
+            'foxglove_bridge = hexapod_metrics.foxglove_node:main',
         ],
     },
 )

@@ -36,6 +36,7 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
@@ -73,6 +74,16 @@ class ControllerNode(LifecycleNode):
         self.waited = 0  # states whose reference or foot forces came after them
         self._load_gains(self.binding.params)
         self._law()  # warm up the compiled law before the first tick
+        self.last_state = -1  # stamp of the newest state of ours (ns)
+        self.announcer = ParamAnnouncer(self, self.binding.params.sim.control_period,
+                                        self._next_tick)
+
+    def _next_tick(self) -> int:
+        """The first tick answered with a parameter changed now."""
+        period_ns = T.stamp_ns(self.binding.params.sim.control_period)
+        if self.pending is not None:
+            return C.tick_of(self.pending, period_ns)
+        return C.tick_of(self.last_state, period_ns) + 1 if self.last_state >= 0 else 0
 
     # ------------------------------------------------------------------ parameters
     def _load_gains(self, p: HexapodParams) -> None:
@@ -168,6 +179,7 @@ class ControllerNode(LifecycleNode):
         if js.frame_id != self.arch or not self.active:
             return
         stamp = js.stamp_ns
+        self.last_state = stamp
         C.fill_obs(self.obs, T.JOINT_STATES, js.position, js.velocity, js.effort)
         self.pending = None
         self.loop.take(self.subs[T.REFERENCE])

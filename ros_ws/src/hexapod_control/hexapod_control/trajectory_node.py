@@ -28,6 +28,7 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.core.gait import Reference, reference
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
@@ -56,6 +57,7 @@ class TrajectoryNode(Node):
         self._reference_of(0)  # warm up (and validate) before the first clock arrives
         self.loop.subscribe(Clock, T.CLOCK, self._on_clock,
                             C.TOPIC_QOS[T.CLOCK].subscriber(C.CONTROL_DEPTH))
+        self.announcer = ParamAnnouncer(self, self.period, lambda: self.next_tick)
 
     def _block(self, b: int) -> Reference:
         ref = self.blocks.get(b)

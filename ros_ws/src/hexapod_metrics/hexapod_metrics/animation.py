@@ -15,10 +15,10 @@ import numpy as np
 from hexapod_sim.core import topics as T
 
 from .core.analysis import label_ticks, controller_changes
+from .core.bag_params import bag_params
 from .core.bag_reader import iter_joint_state_blocks, open_bag
 from .core.errors import BagReadError
 from .core.figure import FORCE_SCALE, stick_figure
-from .core.recording import params_from_custom_data
 from .plots import label
 
 STATE = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
@@ -35,13 +35,11 @@ class Segment:
 
 def load_frames(path: str | Path, fps: float = 30.0) -> tuple[list[Segment], float, bool]:
     """Frame samples of every controller segment, the thigh length, and whether truncated."""
-    from hexapod_sim.core.params import load_params
-
     with open_bag(path) as bag:
         missing = [t for t in STATE if t not in bag.topics]
         if missing:
             raise BagReadError(f"{path}: not a hexapod bag (no {', '.join(missing)})")
-        p = params_from_custom_data((bag.metadata or {}).get("custom_data")) or load_params()
+        p = bag_params(bag).params
         dt_ns = int(round(p.sim.control_period * 1e9))
         stride = max(1, int(round(1.0 / (fps * p.sim.control_period))))
         kept: dict[str, dict[int, np.ndarray]] = {t: {} for t in STATE}

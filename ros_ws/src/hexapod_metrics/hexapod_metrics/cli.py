@@ -82,8 +82,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if not sep:
             raise HexapodError(f"--switch expects TIME:CONTROLLER, got {item!r}")
         switches.append((float(when), who))
+    changes = []
+    for item in args.change:
+        when, sep, assignment = item.partition(":")
+        name, eq, text = assignment.partition("=")
+        if not sep or not eq:
+            raise HexapodError(f"--change expects TIME:NAME=VALUE, got {item!r}")
+        changes.append((float(when), {name.strip(): _parse_value(text.strip())}))
     for c in controllers:
-        sim = simulate(p, c, args.duration, switches=switches)
+        sim = simulate(p, c, args.duration, switches=switches, param_changes=changes)
         if args.bag:
             from .core.recording import write_run_bag
 
@@ -126,6 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--bag", help="also write the run as a rosbag2/MCAP bag to this directory")
     sp.add_argument("--switch", action="append", default=[], metavar="TIME:CONTROLLER",
                     help="hand over to CONTROLLER at TIME s (repeatable), as the graph does")
+    sp.add_argument("--change", action="append", default=[], metavar="TIME:NAME=VALUE",
+                    help="change a ground/actuator/gain parameter from the first tick at or "
+                    "after TIME s (repeatable), as a live change in the graph")
     sp.set_defaults(func=_cmd_simulate)
     for name in COMMAND_MODULES:
         try:

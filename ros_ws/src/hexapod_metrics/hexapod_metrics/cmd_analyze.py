@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from .core.analysis import BagAnalysis, analyze_bag
+from .core.analysis import BagAnalysis, SegmentResult, analyze_bag
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, lag_growth
 
 
@@ -15,17 +15,25 @@ def _fmt(idx: Indices | None, name: str) -> str:
     return "-" if idx is None else f"{getattr(idx, name):.5g}"
 
 
+def _changed(s: SegmentResult) -> str:
+    """' name=value,...' of the parameters changed since the start, '' if none."""
+    return (" " + ",".join(f"{n}={v:g}" if isinstance(v, float) else f"{n}={v}"
+                           for n, v in s.params)) if s.params else ""
+
+
 def _rows(a: BagAnalysis) -> list[dict[str, object]]:
     rows: list[dict[str, object]] = []
     for s in a.segments:
         rows.append({"bag": str(a.path), "kind": "segment", "controller": s.controller,
                      "cycle": "", "t_start": s.t_start, "t_end": s.t_end, "cycles": s.cycles,
+                     "params_changed": _changed(s).strip(),
                      **{n: getattr(s.indices, n) if s.indices else math.nan
                         for n in REPORTED_NAMES}})
     for c in a.cycles:
         idx = c.indices
         rows.append({"bag": str(a.path), "kind": "cycle", "controller": c.controller,
                      "cycle": c.cycle, "t_start": c.t_a, "t_end": c.t_b, "cycles": 1,
+                     "params_changed": "",
                      **{n: getattr(idx, n) if idx else math.nan for n in REPORTED_NAMES}})
     return rows
 
@@ -37,10 +45,13 @@ def _print(analyses: list[BagAnalysis], per_cycle: bool) -> None:
               f"{a.params_source}{note}")
         if len(a.switches) > 1:
             print("  switches: " + ", ".join(f"{c} at {t:.3f} s" for t, c in a.switches[1:]))
+        if a.param_changes:
+            print("  parameter changes (applied from that tick on): " + ", ".join(
+                f"{n} = {v!r} at {t:.3f} s ({node})" for t, node, n, v in a.param_changes))
     cols = [(a, s) for a in analyses for s in a.segments]
     many = len(analyses) > 1
     heads = [f"{(a.path.name + ':') if many else ''}{s.controller} "
-             f"[{s.t_start:g}-{s.t_end:g}s]" for a, s in cols]
+             f"[{s.t_start:g}-{s.t_end:g}s]{_changed(s)}" for a, s in cols]
     width = max([14] + [len(h) + 1 for h in heads])
     print(f"\n{'segment':<8}" + "".join(f"{h:>{width}}" for h in heads))
     print(f"{'cycles':<8}" + "".join(f"{s.cycles:>{width}}" for _, s in cols))

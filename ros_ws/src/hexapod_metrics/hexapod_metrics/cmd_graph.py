@@ -34,10 +34,11 @@ NODES: dict[str, tuple[str, str]] = {
     "pd_pf_controller": ("hexapod_control.controller_node", "main_pd_pf"),
     "metrics": ("hexapod_metrics.metrics_node", "main"),
     "markers": ("hexapod_metrics.marker_node", "main"),
+    "foxglove_bridge": ("hexapod_metrics.foxglove_node", "main"),
 }
 #: Scheduling niceness per node: the recorder yields the CPU to the control loop (it only
 #: has to keep up on average; its queues absorb seconds of lag).
-NICE = {"metrics": 10}
+NICE = {"metrics": 10, "foxglove_bridge": 10}
 #: Nodes that may run on simulated time (``-p use_sim_time:=true`` with ``use_sim_time``).
 #: None of them reads ROS time (they work on the messages' stamps), and each /clock
 #: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is

@@ -27,6 +27,7 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import OBS_SHAPE
 from hexapod_sim.hot_loop import HotLoop, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import declare_params
 
 from .core.figure import FORCE_SCALE, side, stick_figure
@@ -106,6 +107,7 @@ class MarkerNode(Node):
             # falls behind the sim for a while (a short queue rolled over: gaps of 66-264 ms).
             self.loop.subscribe(JointState, topic, self._make_cb(topic),
                                 C.TOPIC_QOS[topic].subscriber(C.RECORD_DEPTH))
+        self.announcer = ParamAnnouncer(self, p.sim.control_period)
 
     def _make_cb(self, topic: str):  # type: ignore[no-untyped-def]
         codec = C.CODECS[topic]

@@ -5,7 +5,10 @@ way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCA
 (:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
-transient-local) and every parameter in the bag's ``custom_data``. The log time of every
+transient-local). Parameters: every node's records from ``/hexapod/parameters`` (start
+values, and each runtime change with its tick) go into the MCAP as checksummed Metadata
+records and into ``metadata.yaml``'s ``custom_data`` (core/recording.py
+``ParamRecorder``); undecodable ones are dropped, counted and logged. The log time of every
 message is its own simulated time (:mod:`~hexapod_metrics.core.log_times`): the header
 stamp, a MarkerArray's first marker stamp, and for ``/hexapod/active_controller`` the tick
 the switch took effect (the first joint_states naming that controller). Chunks are cut at
@@ -47,11 +50,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
@@ -59,7 +65,7 @@ from .core.bag_writer import BagWriter
 from .core.errors import BagError, BagStorageError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
 from .core.log_times import ControllerLogTimes, marker_array_stamp
-from .core.recording import TICK_TOPICS, TOPICS, bag_custom_data, indices_status
+from .core.recording import TICK_TOPICS, TOPICS, ParamRecorder, indices_status
 
 #: The state topics a cycle's indices need, all stamped per tick.
 CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
@@ -181,13 +187,15 @@ class MetricsNode(Node):
                                           "sim s per MCAP file before a new one starts (0: one)")
         self.period = p.sim.control_period
         self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
-        self.writer = BagWriter(self.bag_path, custom_data=bag_custom_data(p, "metrics node"),
+        self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"},
                                 flush_interval_s=0.5, sync_topics=TICK_TOPICS,
                                 follow_topics=(T.MARKERS,),
                                 reorder_window_ns=int(window * 1e9),
                                 max_file_size=int(max_size),
                                 max_file_duration_ns=int(max_duration * 1e9))
         self.writer.open()
+        self.params_log = ParamRecorder(self.writer)
+        self.bad_param_records = 0
         self.failure: BagStorageError | None = None
         self.dropped = 0  # messages received after the recording failed
         self.controller_times = ControllerLogTimes()
@@ -205,6 +213,7 @@ class MetricsNode(Node):
                 continue
             self._subscribe(topic)
         self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
+        self.announcer = ParamAnnouncer(self, self.period, lambda: self.scorer.latest + 1)
         self.log.info(f"recording to {self.bag_path}")
 
     def _write(self, topic: str, log_time: int, data: bytes) -> None:
@@ -245,6 +254,8 @@ class MetricsNode(Node):
             def cb(data: bytes, topic: str = topic) -> None:
                 stamp = marker_array_stamp(data)
                 self._write(topic, self.clock_ns if stamp is None else stamp, data)
+        elif topic == T.PARAMETERS:
+            cb = self._on_param_record
         elif topic == T.ACTIVE_CONTROLLER:  # at the tick the switch took effect
             def cb(data: bytes, topic: str = topic) -> None:
                 self._write_controller(
@@ -253,6 +264,33 @@ class MetricsNode(Node):
             def cb(data: bytes, topic: str = topic) -> None:
                 self._write(topic, C.decode_stamp(data), data)
         self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
+
+    def _on_param_record(self, data: bytes) -> None:
+        """A node's parameter record: into the bag (message, MCAP metadata, mirror)."""
+        self.counts[T.PARAMETERS] += 1
+        try:
+            msg = deserialize_message(data, DiagnosticArray)
+            recs = [ParamRecord.from_map(st.values, f"parameter record '{st.name}'")
+                    for st in C.statuses(msg) if st.name.startswith(RECORD_NAME + "/")]
+        except Exception as err:  # noqa: BLE001 - anything undecodable is dropped, counted
+            self.bad_param_records += 1
+            self.log.warning(f"dropped a {T.PARAMETERS} message ({self.bad_param_records} so "
+                             f"far): {str(err).splitlines()[0] if str(err) else err!r}")
+            return
+        for rec in recs:
+            if self.failure is not None:
+                self.dropped += 1
+                return
+            try:
+                added = self.params_log.add(rec, data if len(recs) == 1 else None)
+            except BagStorageError as err:
+                self.failure = err
+                self.loop.stop()
+                return
+            if added:
+                what = "start values" if rec.kind == "start" else \
+                    ", ".join(f"{k} = {v!r}" for k, v in rec.values.items())
+                self.log.info(f"parameters of {rec.node} at tick {rec.tick}: {what}")
 
     def _publish_cycle(self, cycle: dict[str, Any]) -> None:
         prev = self.scorer.cycles[-1] if self.scorer.cycles else None
@@ -288,7 +326,9 @@ class MetricsNode(Node):
                 self.writer.close()
             except BagStorageError as err:  # the last chunk did not fit
                 self.failure = err
-        report = {"bag": str(self.bag_path), "messages": self.counts, **self.scorer.report(),
+        report = {"bag": str(self.bag_path), "messages": self.counts,
+                  "dropped_parameter_messages": self.bad_param_records,
+                  "parameter_records": len(self.params_log.records), **self.scorer.report(),
                   "recording": self.recording_report()}
         try:
             (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))

@@ -94,6 +94,7 @@ TOPIC_QOS: dict[str, TopicQos] = {
     T.INDICES: TopicQos(DiagnosticArray, depth=100),
     T.STATUS: TopicQos(DiagnosticArray, depth=10),
     T.MARKERS: TopicQos(MarkerArray, depth=100),
+    T.PARAMETERS: TopicQos(DiagnosticArray, transient=True, depth=1000),
 }
 
 # --------------------------------------------------------------------------- stamps

@@ -76,6 +76,7 @@ from .core.errors import DivergenceError, HexapodError, ParameterError
 from .core.layout import O_THV, P_TMAX
 from .core.params import N_LEGS, HexapodParams, check_controller
 from .hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from .param_topic import ParamAnnouncer
 from .ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
@@ -167,6 +168,8 @@ class SimNode(Node):
         self.rtf = 0.0
         self.published_at = 0.0  # wall time (monotonic) the current tick went out
         self.latency = np.zeros(LATENCY_BINS, dtype=np.int64)
+        # Start values now; changes at the tick boundary that applies them (_step).
+        self.announcer = ParamAnnouncer(self, self.period, deferred=True)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -427,6 +430,7 @@ class SimNode(Node):
             self.log.info(f"switched {old} -> {self.in_charge} at tick {k} "
                           f"(t = {k * self.period:.3f} s)")
             self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
+        self.announcer.flush(self.physics.tick)
         self._prepare()
 
     # ------------------------------------------------------------------ status

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from numba import njit, prange
@@ -29,6 +29,8 @@ from .controllers import control_law, controller_code, gain_vector
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
+#: Parameter groups a run can change at a tick (those the model vector and gains hold).
+CHANGEABLE = ("ground.", "actuator.", "pd_p.", "pd_pf.")
 
 
 @njit(cache=True)
@@ -93,6 +95,7 @@ class RunResult:
     reference: Reference
     diverged_at: float | None = None
     switches: tuple[tuple[int, str], ...] = ()
+    param_changes: tuple[tuple[int, dict[str, Any]], ...] = ()
 
     def controller_at(self, k: int) -> str:
         """Controller that computed the command of tick k."""
@@ -112,12 +115,16 @@ def tick_count(p: HexapodParams, duration: float) -> int:
 
 def run(p: HexapodParams, controller: str | None = None, duration: float | None = None,
         progress: Callable[[int, int], None] | None = None,
-        switches: Sequence[tuple[float, str]] = ()) -> RunResult:
+        switches: Sequence[tuple[float, str]] = (),
+        param_changes: Sequence[tuple[float, Mapping[str, Any]]] = ()) -> RunResult:
     """One closed-loop run from the initial state; records every tick.
 
     controller: 'pd_p' | 'pd_pf' (default p.run.controller); duration in s (default
     p.run.duration). ``switches``: (time s, controller) hand-overs; the new controller
     computes the command of the first tick at or after that time, as in the graph.
+    ``param_changes``: (time s, {dotted name: value}) live changes (ground, actuator,
+    gains); the first tick at or after that time is observed and integrated with them, as
+    the sim applies a change at the next tick boundary.
     ``progress(done, total)`` is called after every block of ticks.
     """
     controller = controller or p.run.controller
@@ -126,6 +133,16 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
         (int(math.ceil(ts / p.sim.control_period - 1e-9)), c) for ts, c in switches)
     for _, c in schedule:
         controller_code(c)
+    changes = sorted(((int(math.ceil(ts / p.sim.control_period - 1e-9)), dict(v))
+                      for ts, v in param_changes), key=lambda c: c[0])
+    for _, values in changes:
+        for name, value in values.items():
+            if not name.startswith(CHANGEABLE):
+                raise ParameterError(name, value, "a change during a run only of "
+                                     + ", ".join(g + "*" for g in CHANGEABLE))
+    params_at = [(0, p)]
+    for k, values in changes:
+        params_at.append((k, params_at[-1][1].with_values(**values)))
     t = np.arange(n + 1) * p.sim.control_period
     ref = reference(p, t)
     P = model_vector(p)
@@ -134,10 +151,14 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     obs = np.full((n + 1,) + OBS_SHAPE, np.nan)
     cmd = np.full((n, N_LEGS, 2), np.nan)
     diverged_at = None
-    cuts = sorted({k for k, _ in schedule if 0 < k < n} | set(range(0, n, BLOCK_TICKS)) | {n})
+    cuts = sorted({k for k, _ in schedule + params_at if 0 < k < n}
+                  | set(range(0, n, BLOCK_TICKS)) | {n})
     for k0, k1 in zip(cuts[:-1], cuts[1:]):
         who = [c for k, c in schedule if k <= k0][-1]
-        done = run_ticks(s, P, controller_code(who), gain_vector(p.gains(who)),
+        cur = [q for k, q in params_at if k <= k0][-1]
+        if k0 > 0 and any(k == k0 for k, _ in params_at):
+            P = model_vector(cur)
+        done = run_ticks(s, P, controller_code(who), gain_vector(cur.gains(who)),
                          ref.theta[k0:k1], ref.theta_vel[k0:k1], torque, p.substeps, k0,
                          obs[k0:k1], cmd[k0:k1], k0)
         if progress is not None:
@@ -146,9 +167,12 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
             diverged_at = float(t[k0 + done])
             break
     else:
+        if any(k == n for k, _ in params_at[1:]):
+            P = model_vector([q for k, q in params_at if k <= n][-1])
         observe(s, torque, P, obs[n])
     applied = tuple((k, c) for k, c in schedule if k < n)
-    return RunResult(p, controller, t, obs, cmd, ref, diverged_at, applied)
+    return RunResult(p, controller, t, obs, cmd, ref, diverged_at, applied,
+                     tuple((k, v) for k, v in changes if k <= n))
 
 
 @dataclass(frozen=True)
@@ -211,5 +235,5 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
 
 
-__all__ = ["BLOCK_TICKS", "BatchResult", "Case", "RunResult", "run", "run_batch", "run_ticks",
-           "shared_reference_key", "tick_count"]
+__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "run", "run_batch",
+           "run_ticks", "shared_reference_key", "tick_count"]

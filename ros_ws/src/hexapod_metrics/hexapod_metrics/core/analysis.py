@@ -8,24 +8,28 @@ node's numbers.
 
 Which controller was in charge at each tick comes from the ``header.frame_id`` of
 ``/hexapod/joint_states`` (the sim writes the controller's name there); segments are split at
-its changes, i.e. at the recorded switches.
+its changes, i.e. at the recorded switches, and at every recorded parameter change
+(bag_params.py), each segment naming the values that differ from the start.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import O_HP, O_TQ
-from hexapod_sim.core.params import HexapodParams, load_params
+from hexapod_sim.core.param_log import ParamTimeline
+from hexapod_sim.core.params import HexapodParams
 
+from .bag_params import bag_params
 from .bag_reader import Bag, iter_joint_state_blocks, open_bag
 from .cdr import decode_diagnostic_array
 from .errors import BagReadError
 from .indices import Indices, WindowSums, sums_from_obs
-from .recording import params_from_custom_data, status_indices
+from .recording import status_indices
 
 STREAMS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
 #: At most this many points per plot series (older points are thinned by 2 when exceeded).
@@ -59,6 +63,8 @@ class SegmentResult:
     t_end: float
     cycles: int
     indices: Indices | None
+    params: tuple[tuple[str, Any], ...] = ()
+    """Parameters in force over the segment that differ from the start values."""
 
 
 @dataclass
@@ -103,6 +109,8 @@ class BagAnalysis:
     switches: list[tuple[float, str]]
     online: list[tuple[int, str, Indices]]
     series: PlotSeries
+    param_changes: list[tuple[float, str, str, Any]] = field(default_factory=list)
+    """(time s, node, name, value) of every recorded parameter change, applied there."""
 
 
 def controller_changes(bag: Bag, dt_ns: int,
@@ -192,17 +200,15 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         missing = [t for t in STREAMS if t not in bag.topics]
         if missing:
             raise BagReadError(f"{path}: not a hexapod bag (no {', '.join(missing)})")
-        custom = (bag.metadata or {}).get("custom_data") or {}
-        p = params_from_custom_data(custom)
-        source = "recorded in the bag"
-        if p is None:
-            p, source = load_params(), "the shipped defaults (the bag records none)"
+        p, source, tl, _ = bag_params(bag)
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
-        online = online_indices(bag)
-        frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
-        changes: list[tuple[int, str]] = []  # grows as joint_states are read
+        online: list[tuple[int, str, Indices]] = []
+        changes = controller_changes(bag, dt_ns, online)
+        switches = [(k * dt, c) for k, c in changes]
+        if tl is not None:
+            changes = with_param_boundaries(changes, tl)
         buffers = {t: _Buffer() for t in STREAMS}
         series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
                                        // MAX_PLOT_POINTS))
@@ -247,10 +253,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             return CycleResult(c, k0 * dt, k1 * dt, who,
                                sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
-        for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames):
-            if frames[T.JOINT_STATES]:
-                changes += ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
-                frames[T.JOINT_STATES].clear()
+        for topic, arrays in iter_joint_state_blocks(bag, STREAMS):
             k = np.rint(arrays.stamps / dt_ns).astype(np.int64)
             buffers[topic].push(k, arrays.position, arrays.velocity, arrays.effort)
             if topic == T.JOINT_STATES:
@@ -265,14 +268,25 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
     if ticks == 0:
         why = f" (truncated: {reason})" if truncated else ""
         raise BagReadError(f"{path}: no hexapod samples in the readable part of the bag{why}")
-    segments = _segments(cycles, changes, dt, last_tick * dt)
-    switches = [(k * dt, c) for k, c in changes]
+    segments = _segments(cycles, changes, dt, last_tick * dt, tl)
+    param_changes = [(k * dt, node, name, v) for k, node, name, v in tl.changes
+                     if k > 0] if tl else []
     return BagAnalysis(Path(path), p, source, truncated, reason, ticks, cycles, segments,
-                       switches, online, series)
+                       switches, online, series, param_changes)
+
+
+def with_param_boundaries(changes: list[tuple[int, str]],
+                          tl: ParamTimeline) -> list[tuple[int, str]]:
+    """Controller changes plus a boundary (same controller) at every parameter change."""
+    out = dict(changes)
+    for k in tl.change_ticks:
+        if k > 0 and k not in out:
+            out[k] = label_ticks(changes, [k])[0] if changes else "unknown"
+    return sorted(out.items())
 
 
 def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: float,
-              t_last: float) -> list[SegmentResult]:
+              t_last: float, tl: ParamTimeline | None = None) -> list[SegmentResult]:
     """One segment per controller stretch; its indices cover its complete cycles."""
     out = []
     bounds = [k for k, _ in changes[1:]]
@@ -284,9 +298,15 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
         total = None
         for c in mine:
             total = c.sums if total is None else total + c.sums
-        out.append(SegmentResult(who, t0, t1, len(mine), total.indices() if total else None))
+        changed: tuple[tuple[str, Any], ...] = ()
+        if tl is not None:
+            now = tl.at(k)
+            changed = tuple((n, now[n]) for n in sorted(now)
+                            if now[n] != tl.start.get(n) and n != "run.controller")
+        out.append(SegmentResult(who, t0, t1, len(mine), total.indices() if total else None,
+                                 changed))
     return out
 
 
 __all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag", "label_ticks",
-           "controller_changes", "online_indices", "ticks_of_changes"]
+           "controller_changes", "online_indices", "ticks_of_changes", "with_param_boundaries"]

@@ -161,7 +161,8 @@ class _McapFile:
         self.reason = ''
         self.data_start = 0
         self.summary_damaged = False
-        self.metadata_index: dict[str, tuple[int, int]] = {}
+        self.metadata_index: dict[str, tuple[int, int]] = {}  # name -> the last record's
+        self.metadata_at: list[tuple[int, int]] = []  # (offset, length) of Metadata records
         self.writer: dict[str, str] = {}
         """The ``hexapod_writer`` metadata record (state, late messages, failure), if any."""
         try:
@@ -224,6 +225,7 @@ class _McapFile:
             self.blocks.clear()
             self.counts.clear()
             self.metadata_index.clear()
+            self.metadata_at.clear()
             return False
         self.summary_damaged = False
         try:
@@ -275,6 +277,7 @@ class _McapFile:
                     msg = f'{self.what}: metadata index points past the end of the file'
                     raise BagReadError(msg)
                 self.metadata_index[rd.string()] = (offset, size)
+                self.metadata_at.append((offset, size))
             elif opcode == 0x0B:
                 rd = _Reader(body, self.what)
                 rd.take(42)
@@ -348,6 +351,8 @@ class _McapFile:
                 last_chunk.indexes[channel] = (pos, length)
             elif opcode == 0x05:
                 self.blocks.append(_Loose(pos, length))
+            elif opcode == 0x0C:
+                self.metadata_at.append((pos, 9 + length))
             elif opcode == 0x03:
                 self._schema(self._read(pos + 9, length))
             elif opcode == 0x04:
@@ -582,6 +587,23 @@ class Bag:
                 with _boundary(mf.what):
                     items = list(_block_messages(mf, block, ids))
                 yield from items
+
+    def metadata_records(self, name: str | None = None) -> list[tuple[str, dict[str, str]]]:
+        """(name, string map) of the MCAP Metadata records (all, or those named ``name``),
+        from the summary's index or, in a file without one, from the scanned data section."""
+        out = []
+        for mf in self.files:
+            with _boundary(mf.what):
+                for offset, length in mf.metadata_at:
+                    raw = mf._read(offset, length)
+                    if raw[0] != 0x0C or _U64.unpack_from(raw, 1)[0] != length - 9:
+                        msg = f'{mf.what}: metadata index at byte {offset} does not point at one'
+                        raise BagReadError(msg)
+                    rd = _Reader(raw[9:], mf.what)
+                    key = rd.string()
+                    if name is None or key == name:
+                        out.append((key, rd.string_map()))
+        return out
 
     def close(self) -> None:
         """Close the files."""

@@ -54,7 +54,7 @@ import time
 import zlib
 from bisect import bisect_left
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
 from types import TracebackType
@@ -211,6 +211,8 @@ class _File:
     log: list[_Commit]
     size: int = 0
     """Bytes in the file (the committed data section and its tail)."""
+    metadata_indexes: list[bytes] = field(default_factory=list)
+    """Metadata Index records of the Metadata records in this file's data section."""
 
     @property
     def end(self) -> int:
@@ -297,7 +299,6 @@ class BagWriter:
         self._by_channel: dict[int, _Topic] = {}
         self._schemas: dict[str, tuple[int, bytes]] = {}
         self._channels: list[bytes] = []
-        self._records: dict[str, dict[str, str]] = {}
         self._attachments: dict[str, tuple[str, bytes, int]] = {}
         self._sync: set[int] = set()
         self._follow: set[int] = set()
@@ -442,24 +443,41 @@ class BagWriter:
             self._append((schema if new_schema else b'') + channel)
             self._write_metadata()
 
-    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        """Store (or replace) an MCAP Metadata record ``name`` of string key/values.
+    def add_metadata(self, name: str, items: Mapping[str, str]) -> None:
+        """Write an MCAP Metadata record now (data section) and index it in the summary.
 
-        It is part of every tail written from now on, so a killed writer keeps it too.
-        The names ``rosbag2`` and ``hexapod_writer`` are the writer's own.
+        It is on disk when this returns (with a summary that indexes it), so a writer
+        killed later still leaves it; records of one name accumulate. The names
+        ``rosbag2`` and ``hexapod_writer`` are the writer's own.
         """
         if name in ('rosbag2', 'hexapod_writer'):
             msg = f'metadata record name {name!r} is reserved by the bag writer'
             raise BagWriteError(msg)
-        items = {str(k): str(v) for k, v in data.items()}
         with self._lock:
             self._check_open()
-            self._records[name] = items
-            self._append(b'')
+            f = self._file
+            assert f is not None
+            at = f.end
+            record = _record(0x0C, _string(name) + _string_map(items))
+            index = _record(0x0D, _U64.pack(at) + _U64.pack(len(record)) + _string(name))
+            f.metadata_indexes.append(index)  # in the summary of the tail written next
+            try:
+                self._append(record)
+            except BaseException:
+                if f.metadata_indexes and f.metadata_indexes[-1] is index:
+                    f.metadata_indexes.pop()
+                raise
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Set one ``custom_data`` entry of ``metadata.yaml`` and rewrite it now."""
+        with self._lock:
+            self._custom[key] = value
+            if self._file is not None:
+                self._write_metadata()
 
     def add_attachment(self, name: str, data: bytes, media_type: str = 'application/json',
                        log_time_ns: int = 0) -> None:
-        """Store (or replace) an MCAP Attachment (kept in every tail, like metadata)."""
+        """Store (or replace) an MCAP Attachment (kept in every tail written from now on)."""
         with self._lock:
             self._check_open()
             self._attachments[name] = (media_type, bytes(data), int(log_time_ns))
@@ -752,8 +770,7 @@ class BagWriter:
         if self.failure:
             writer['failure'] = self.failure
         text = self._metadata_text(0, commit)
-        records = [('rosbag2', {'serialized_metadata': text}),
-                   ('hexapod_writer', writer), *self._records.items()]
+        records = [('rosbag2', {'serialized_metadata': text}), ('hexapod_writer', writer)]
         data = bytearray()
         meta_index = []
         for name, items in records:
@@ -779,7 +796,7 @@ class BagWriter:
             (0x04, b''.join(self._channels)),
             (0x08, chunk_indexes),
             (0x0A, b''.join(attach_index)),
-            (0x0D, b''.join(meta_index)),
+            (0x0D, b''.join(f.metadata_indexes) + b''.join(meta_index)),
             (0x0B, self._statistics(f, commit)),
         ]
         summary = bytearray()
@@ -812,7 +829,7 @@ class BagWriter:
         return _record(
             0x0B,
             _U64.pack(total) + _U16.pack(len(self._schemas)) + _U32.pack(len(self._topics))
-            + _U32.pack(len(self._attachments)) + _U32.pack(2 + len(self._records))
+            + _U32.pack(len(self._attachments)) + _U32.pack(2 + len(f.metadata_indexes))
             + _U32.pack(chunks) + _U64.pack(start) + _U64.pack(end)
             + _U32.pack(len(counts)) + counts,
         )

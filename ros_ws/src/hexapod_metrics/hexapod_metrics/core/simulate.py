@@ -8,7 +8,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -56,14 +56,16 @@ def window_ticks(p: HexapodParams, duration: float) -> tuple[int, int]:
 
 def simulate(p: HexapodParams, controller: str | None = None, duration: float | None = None,
              progress: Callable[[int, int], None] | None = None,
-             switches: Sequence[tuple[float, str]] = ()) -> Simulation:
+             switches: Sequence[tuple[float, str]] = (),
+             param_changes: Sequence[tuple[float, Mapping[str, Any]]] = ()) -> Simulation:
     """Run one case in process and compute the indices of its evaluation window.
 
-    ``switches``: (time s, controller) hand-overs during the run (see closed_loop.run)."""
+    ``switches``: (time s, controller) hand-overs during the run, ``param_changes``: (time
+    s, {name: value}) live parameter changes (see closed_loop.run)."""
     controller = controller or p.run.controller
     duration = p.run.duration if duration is None else duration
     k_a, k_b = window_ticks(p, duration)
-    r = run(p, controller, duration, progress, switches)
+    r = run(p, controller, duration, progress, switches, param_changes)
     window = (float(r.t[k_a]), float(r.t[k_b]))
     case = Case(p, controller)
     if r.diverged_at is not None:

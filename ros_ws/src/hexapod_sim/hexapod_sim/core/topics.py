@@ -25,6 +25,8 @@ INDICES = "/hexapod/indices"
 STATUS = "/hexapod/status"
 CLOCK = "/clock"
 MARKERS = "/hexapod/markers"
+#: Parameter records (core/param_log.py): each node's start values and changes, transient-local.
+PARAMETERS = "/hexapod/parameters"
 
 JOINT_NAMES = tuple(f"leg{i + 1}_{j}" for i in range(N_LEGS) for j in ("hip", "knee"))
 FOOT_NAMES = tuple(f"leg{i + 1}_foot_{a}" for i in range(N_LEGS) for a in ("x", "y"))

@@ -1,0 +1,104 @@
+"""The parameters a bag records: checksummed records in the MCAP, mirrored in metadata.yaml.
+
+The MCAP's Metadata records named ``hexapod_parameters`` (hexapod_sim/core/param_log.py) are
+the truth: each node's start values and every runtime change with the tick it took
+effect. They are read from a bare ``.mcap`` as well as from a bag directory, and also from a
+file whose writer was killed (the records are written at once, outside the chunks).
+A record that fails its checksum, or a ``metadata.yaml`` whose mirror disagrees with the
+MCAP, makes the bag refused (:class:`~.errors.BagReadError`): numbers computed with
+parameters that cannot be trusted would be misread. Bags without records (older ones)
+fall back to ``metadata.yaml``'s ``custom_data``, then to the shipped defaults, and say so.
+"""
+from __future__ import annotations
+
+import json
+from typing import Any, NamedTuple
+
+from hexapod_sim.core.errors import HexapodError
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord, ParamRecordError, ParamTimeline
+from hexapod_sim.core.param_log import timeline as make_timeline
+from hexapod_sim.core.params import SPECS, HexapodParams, from_flat, load_params
+
+from .bag_reader import Bag
+from .errors import BagReadError
+from .recording import PARAMS_KEY, RECORDS_KEY, params_from_custom_data
+
+FROM_MCAP = "recorded in the bag (MCAP records, checksummed)"
+FROM_YAML = "metadata.yaml only (no checksummed record in the MCAP)"
+DEFAULTS = "the shipped defaults (the bag records none)"
+
+
+class BagParams(NamedTuple):
+    """The start parameters, where they came from, and the timeline of changes (if any)."""
+
+    params: HexapodParams
+    source: str
+    timeline: ParamTimeline | None
+    records: tuple[ParamRecord, ...] = ()
+
+
+def read_records(bag: Bag) -> list[ParamRecord]:
+    """Every parameter record of the MCAP, checked; BagReadError names a damaged one."""
+    raw = bag.metadata_records(RECORD_NAME)
+    out = []
+    for i, (_, items) in enumerate(raw):
+        try:
+            out.append(ParamRecord.from_map(items, f"parameter record {i + 1} of {len(raw)}"))
+        except ParamRecordError as err:
+            msg = f"{bag.path}: {err}; refusing to analyse a bag whose parameters are damaged"
+            raise BagReadError(msg) from err
+    return out
+
+
+def _check_mirror(bag: Bag, custom: dict[str, Any], records: list[ParamRecord]) -> None:
+    """metadata.yaml's mirror must be a prefix of the MCAP's records (it may lag them)."""
+    where = f"{bag.path}: metadata.yaml"
+    if RECORDS_KEY in custom:
+        try:
+            mirror = json.loads(custom[RECORDS_KEY])
+        except (TypeError, ValueError) as err:
+            raise BagReadError(f"{where}: {RECORDS_KEY} is not JSON ({err})") from err
+        mcap = [r.to_map() for r in records]
+        if not isinstance(mirror, list) or mirror != mcap[:len(mirror)]:
+            raise BagReadError(f"{where}'s parameter records disagree with the MCAP's "
+                               f"checksummed ones: refusing to guess which is right")
+    if PARAMS_KEY in custom:
+        try:
+            flat = json.loads(custom[PARAMS_KEY])
+        except (TypeError, ValueError) as err:
+            raise BagReadError(f"{where}: {PARAMS_KEY} is not JSON ({err})") from err
+        starts = [{k: v for k, v in r.values.items() if k in SPECS}
+                  for r in records if r.kind == "start"]
+        if flat not in starts:
+            bad = sorted(k for k in flat if all(s.get(k) != flat[k] for s in starts))
+            raise BagReadError(f"{where}: {PARAMS_KEY} disagrees with the MCAP's checksummed "
+                               f"start parameters ({', '.join(bad[:3]) or 'keys'}): refusing "
+                               f"to guess which is right")
+
+
+def bag_params(bag: Bag) -> BagParams:
+    """The parameters of ``bag`` (see the module docstring)."""
+    custom = (bag.metadata or {}).get("custom_data") or {}
+    records = read_records(bag)
+    if records:
+        tl = make_timeline(records, SPECS)
+        if tl is None:
+            raise BagReadError(f"{bag.path}: parameter records without any start record")
+        if missing := sorted(set(SPECS) - set(tl.start)):
+            raise BagReadError(f"{bag.path}: the start records lack {', '.join(missing[:3])}")
+        _check_mirror(bag, custom, records)
+        try:
+            p = from_flat(tl.start)
+        except HexapodError as err:
+            raise BagReadError(f"{bag.path}: recorded start parameters: {err}") from err
+        return BagParams(p, FROM_MCAP, tl, tuple(records))
+    try:
+        p = params_from_custom_data(custom)
+    except (HexapodError, ValueError, TypeError) as err:
+        raise BagReadError(f"{bag.path}: metadata.yaml's parameters: {err}") from err
+    if p is not None:
+        return BagParams(p, FROM_YAML, None)
+    return BagParams(load_params(), DEFAULTS, None)
+
+
+__all__ = ["BagParams", "DEFAULTS", "FROM_MCAP", "FROM_YAML", "bag_params", "read_records"]

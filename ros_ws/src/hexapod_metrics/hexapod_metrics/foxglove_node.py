@@ -1,0 +1,137 @@
+"""Node ``foxglove_bridge``: the graph's topics live over the Foxglove WebSocket protocol.
+
+Every topic a bag records (:data:`~hexapod_metrics.core.recording.TOPICS`) is subscribed raw
+and forwarded as it is: CDR bytes on a channel with the topic's full ``ros2msg`` schema
+(the same definitions the bags carry), through the ``foxglove-sdk`` WebSocket server on
+``host:port`` (parameters; default ``127.0.0.1:8765``, localhost only). A message is logged
+at its own stamp (simulated time; the markers at their first marker's stamp, the active
+controller at the latest ``/clock``), and the server broadcasts the simulated time so that
+Foxglove's clock follows the sim. Open Foxglove, "Open connection", Foxglove WebSocket,
+``ws://localhost:8765``, and load ``docs/foxglove/hexapod_layout.json``.
+
+The node only reads: messages are taken in batches (``batch_interval``) at low priority
+(``scripts/run_graph.sh`` starts it niced), like the recorder.
+"""
+from __future__ import annotations
+
+import struct
+import sys
+from typing import Any
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from hexapod_sim import conversions as C
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import declare_node_param
+
+from .core.msgdefs import lookup
+from .core.recording import TOPICS
+
+_STAMP = struct.Struct("<iI")
+#: Topics whose messages start with a std_msgs/Header (or are a Clock): stamp at byte 4.
+STAMPED = {t for t, (msgtype, _) in TOPICS.items()
+           if msgtype not in ("std_msgs/msg/String", "visualization_msgs/msg/MarkerArray")}
+
+
+def marker_stamp(data: bytes) -> int | None:
+    """Stamp (ns) of the first marker of a serialized MarkerArray, None if it has none."""
+    if len(data) < 16 or int.from_bytes(data[4:8], "little") == 0:
+        return None
+    sec, nsec = _STAMP.unpack_from(data, 8)
+    return sec * 1_000_000_000 + nsec
+
+
+class FoxgloveBridge(Node):
+    """Forwards the recorded topics to Foxglove clients."""
+
+    def __init__(self) -> None:
+        super().__init__("foxglove_bridge")
+        import foxglove
+
+        self.log = FastLogger(self.get_logger().name)
+        host = declare_node_param(self, "host", "127.0.0.1", "address to listen on")
+        port = declare_node_param(self, "port", 8765, "WebSocket port (0 = any free one)")
+        if not 0 <= port <= 65535:
+            raise ParameterError("port", port, "an int in [0, 65535]")
+        batch = declare_node_param(self, "batch_interval", 0.01,
+                                   "s between two takes of the queued messages")
+        try:
+            self.server = foxglove.start_server(
+                name="hexapod", host=host, port=port,
+                capabilities=[foxglove.Capability.Time])
+        except Exception as err:  # noqa: BLE001 - the SDK raises its own runtime errors
+            raise HexapodError(f"cannot serve Foxglove on {host}:{port}: {err}") from err
+        self.port = self.server.port
+        self.clock_ns = 0
+        self.sent = 0
+        self.channels: dict[str, Any] = {}
+        self.loop = HotLoop(self, batch_interval=batch)
+        for topic, (msgtype, _) in TOPICS.items():
+            definition = lookup(msgtype)
+            assert definition is not None, msgtype
+            schema = foxglove.Schema(name=msgtype, encoding="ros2msg",
+                                     data=definition.definition.encode())
+            self.channels[topic] = foxglove.Channel(topic, message_encoding="cdr",
+                                                    schema=schema)
+            q = C.TOPIC_QOS[topic]
+            self.loop.subscribe(q.msg_type, topic, self._forwarder(topic),
+                                q.subscriber(C.RECORD_DEPTH))
+        self.announcer = ParamAnnouncer(self, 1e-3)  # its own parameters, at tick 0
+        self.log.info(f"Foxglove WebSocket server on ws://{host}:{self.port} "
+                      f"({len(self.channels)} topics)")
+
+    def _forwarder(self, topic: str):  # type: ignore[no-untyped-def]
+        channel = self.channels[topic]
+        stamped = topic in STAMPED
+
+        def cb(data: bytes) -> None:
+            if stamped:
+                stamp = C.decode_stamp(data)
+                if topic == T.CLOCK and stamp > self.clock_ns:
+                    self.clock_ns = stamp
+                    self.server.broadcast_time(stamp)
+            elif topic == T.MARKERS:
+                stamp = marker_stamp(data) or self.clock_ns
+            else:
+                stamp = self.clock_ns
+            channel.log(bytes(data), log_time=stamp)
+            self.sent += 1
+        return cb
+
+    def close(self) -> None:
+        """Stop the server."""
+        self.server.stop()
+        self.log.info(f"Foxglove server stopped ({self.sent} messages forwarded)")
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``foxglove_bridge``."""
+    if not init_rclpy(args, "foxglove_bridge"):
+        return 2
+    node = None
+    code = 0
+    try:
+        node = FoxgloveBridge()
+        install_stop_signals(node.loop)
+        node.loop.spin()
+    except HexapodError as err:
+        rclpy.logging.get_logger("foxglove_bridge").error(str(err))
+        code = 2 if isinstance(err, ParameterError) else 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.loop.destroy()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,122 @@
+"""A live parameter change in a lockstep graph: recorded with its tick, applied by analyze,
+equal to the in-process engine run with the same change."""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from hexapod_control.core.closed_loop import run
+from hexapod_metrics.core.analysis import analyze_bag
+from hexapod_metrics.core.bag_params import FROM_MCAP, read_records
+from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
+from hexapod_metrics.core.recording import RECORDS_KEY
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.layout import O_TH, O_TQ
+
+from .conftest import call, fast_params, ros_client, sim_summary
+
+DURATION = 4.0
+NODES = "trajectory_generator,pd_pf_controller,metrics"
+
+
+def _wait_sim_time(node, seconds: float, timeout: float = 120.0) -> float:
+    """Spin ``node`` until a /clock of at least ``seconds`` arrived; that time."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    seen = [0.0]
+    node.create_subscription(
+        Clock, T.CLOCK, lambda m: seen.__setitem__(0, m.clock.sec + m.clock.nanosec * 1e-9),
+        QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+    ex = SingleThreadedExecutor(context=node.context)
+    ex.add_node(node)
+    end = time.monotonic() + timeout
+    while seen[0] < seconds and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+    ex.remove_node(node)
+    assert seen[0] >= seconds, f"sim time stayed at {seen[0]} s"
+    return seen[0]
+
+
+def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engine(
+        make_graph, tmp_path):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    bag = tmp_path / "bag"
+    g = make_graph()
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
+            f"wait_for:={NODES}")
+    with ros_client(g.domain_id) as node:
+        _wait_sim_time(node, 0.5)
+        # Hostile input first: a record that fails its checksum, and bytes that do not decode.
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from hexapod_sim import conversions as C
+        from hexapod_sim.core.param_log import ParamRecord
+
+        forged = ParamRecord("hexapod_sim", "change", 600, 600_000_000, {"ground.scale": 9.0})
+        bad = dict(forged.to_map(), sha256="0" * 64)
+        pub = node.create_publisher(DiagnosticArray, T.PARAMETERS,
+                                    C.TOPIC_QOS[T.PARAMETERS].publisher())
+        pub.publish(C.diagnostic_array(600_000_000, [C.Status(
+            "hexapod_parameters/hexapod_sim", "ok", "change", bad)]))
+        pub.publish(b"\x00\x01\x00\x00garbage")
+        g.wait_log("metrics", "dropped a /hexapod/parameters message (2 so far)", 60)
+        _wait_sim_time(node, 1.0)
+        value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0)
+        req = SetParameters.Request(parameters=[Parameter(name="ground.scale", value=value)])
+        res = call(node, SetParameters, "/hexapod_sim/set_parameters", req).results[0]
+        assert res.successful, res.reason
+    assert g.wait_exit("hexapod_sim", 300) == 0, g.log("hexapod_sim")
+    assert sim_summary(g.log("hexapod_sim"))["missed"] == 0
+    g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+
+    # The bag holds every node's start values and the change, checksummed, yaml mirrored.
+    with open_bag(bag) as b:
+        records = read_records(b)
+        custom = b.metadata["custom_data"]
+        js = read_joint_state_arrays(b, T.JOINT_STATES)
+    starts = {r.node for r in records if r.kind == "start"}
+    assert {"hexapod_sim", "trajectory_generator", "pd_pf_controller", "metrics"} <= starts
+    change = [r for r in records if r.kind == "change"]
+    assert len(change) == 1 and change[0].node == "hexapod_sim"
+    assert change[0].values == {"ground.scale": 2.0}
+    k = change[0].tick
+    assert 1000 <= k < 4000 and change[0].stamp_ns == k * 1_000_000
+    assert json.loads(custom[RECORDS_KEY]) == [r.to_map() for r in records]
+
+    report = json.loads((bag / "indices.json").read_text())
+    assert report["dropped_parameter_messages"] == 2
+    assert report["parameter_records"] == len(records)
+
+    # analyze applies it at its tick: segments split there, the later ones name it.
+    a = analyze_bag(bag)
+    assert a.params_source == FROM_MCAP and not a.truncated
+    assert a.param_changes == [(pytest.approx(k * 1e-3), "hexapod_sim", "ground.scale", 2.0)]
+    assert a.segments[0].params == () and a.segments[-1].params == (("ground.scale", 2.0),)
+    assert a.segments[-1].t_start == pytest.approx(k * 1e-3)
+
+    # The engine with the same change at the same tick gives the same samples and indices.
+    r = run(fast_params(), "pd_pf", DURATION, param_changes=[(k * 1e-3, {"ground.scale": 2.0})])
+    n = r.obs.shape[0]
+    assert np.array_equal(js.stamps, np.arange(n) * 1_000_000)
+    np.testing.assert_allclose(js.effort.reshape(-1, 6, 2), r.obs[:, O_TQ], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(js.position.reshape(-1, 6, 2), r.obs[:, O_TH], rtol=0, atol=1e-9)
+    assert len(a.cycles) == 4
+    for c in a.cycles:
+        sl = slice(int(round(c.t_a * 1000)), int(round(c.t_b * 1000)) + 1)
+        ref = indices_from_obs(r.obs[sl], r.reference.hip[sl], r.reference.foot[sl], 1e-3)
+        for name in INDEX_NAMES:
+            assert getattr(c.indices, name) == pytest.approx(getattr(ref, name), rel=1e-12)
+    # ... and differs from a run without it (the change acted).
+    base = run(fast_params(), "pd_pf", DURATION)
+    assert not np.allclose(base.obs[k + 10:], r.obs[k + 10:])
