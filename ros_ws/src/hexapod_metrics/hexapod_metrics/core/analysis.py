@@ -204,11 +204,12 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
-        online: list[tuple[int, str, Indices]] = []
-        changes = controller_changes(bag, dt_ns, online)
-        switches = [(k * dt, c) for k, c in changes]
-        if tl is not None:
-            changes = with_param_boundaries(changes, tl)
+        online = online_indices(bag)
+        # controller changes (joint_states' frame_id, found vectorised in the same pass as
+        # the decoding) and, among them, a boundary at every parameter change
+        frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
+        switch_ticks: list[tuple[int, str]] = []
+        changes: list[tuple[int, str]] = []
         buffers = {t: _Buffer() for t in STREAMS}
         series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
                                        // MAX_PLOT_POINTS))
@@ -253,7 +254,12 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             return CycleResult(c, k0 * dt, k1 * dt, who,
                                sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
-        for topic, arrays in iter_joint_state_blocks(bag, STREAMS):
+        for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames):
+            if frames[T.JOINT_STATES]:  # labels of ticks up to the newest state are final
+                switch_ticks += ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
+                frames[T.JOINT_STATES].clear()
+                changes = (with_param_boundaries(switch_ticks, tl) if tl is not None
+                           else list(switch_ticks))
             k = np.rint(arrays.stamps / dt_ns).astype(np.int64)
             buffers[topic].push(k, arrays.position, arrays.velocity, arrays.effort)
             if topic == T.JOINT_STATES:
@@ -269,6 +275,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         why = f" (truncated: {reason})" if truncated else ""
         raise BagReadError(f"{path}: no hexapod samples in the readable part of the bag{why}")
     segments = _segments(cycles, changes, dt, last_tick * dt, tl)
+    switches = [(k * dt, c) for k, c in switch_ticks]
     param_changes = [(k * dt, node, name, v) for k, node, name, v in tl.changes
                      if k > 0] if tl else []
     return BagAnalysis(Path(path), p, source, truncated, reason, ticks, cycles, segments,
