@@ -15,15 +15,17 @@ from .bag_reader import (
     read_joint_state_arrays,
     read_joint_state_topics,
 )
-from .bag_writer import QOS_PRESETS, BagWriter, QosProfile, qos_yaml
+from .bag_writer import QOS_PRESETS, RESERVE_NAME, BagWriter, QosProfile, qos_yaml
 from .cdr import DiagnosticStatus, JointStateArrays
-from .errors import BagError, BagReadError, BagTruncatedWarning, BagWriteError
+from .errors import BagError, BagReadError, BagStorageError, BagTruncatedWarning, BagWriteError
 
 __all__ = [
     'QOS_PRESETS',
+    'RESERVE_NAME',
     'Bag',
     'BagError',
     'BagReadError',
+    'BagStorageError',
     'BagTruncatedWarning',
     'BagWriteError',
     'BagWriter',
