@@ -100,6 +100,24 @@ def test_divergence_is_reported_not_scored():
     assert batch[0].indices is None and batch[1].indices is not None
 
 
+def test_diverged_case_leaves_its_block_without_touching_the_others():
+    """A case that blows up mid-run drops out of its block (its column is swapped out);
+    the cases beside it, before and after it, still give their single runs' numbers."""
+    p = load_params()
+    bad = p.with_values(**{"body.k_x": 1e11})
+    cases = [Case(p, "pd_pf"), Case(bad, "pd_pf"),
+             Case(p.with_values(**{"ground.scale": 2.0}), "pd_p"), Case(bad, "pd_p"),
+             Case(p.with_values(**{"actuator.t_max": 150.0}), "pd_pf")]
+    batch = evaluate_batch(cases, 3.0)
+    assert [o.status for o in batch] == ["ok", "diverged", "ok", "diverged", "ok"]
+    for c, b in zip(cases, batch):
+        if b.status == "ok":
+            one = simulate(c.params, c.controller, 3.0)
+            for name in INDEX_NAMES + ("L",):
+                assert getattr(b.indices, name) == pytest.approx(
+                    getattr(one.indices, name), rel=1e-12, abs=1e-15)
+
+
 def test_walks_forward_at_commanded_speed():
     p = load_params()
     idx = simulate(p, "pd_pf").indices

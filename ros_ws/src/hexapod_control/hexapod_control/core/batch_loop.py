@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 from hexapod_sim.core.actuator import clip_torque
-from hexapod_sim.core.batch_physics import (block_integrate, block_prepare, block_sample,
+from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_sample,
                                             block_scratch, block_solve, swap_columns)
 from hexapod_sim.core.engine import state_ok
 from hexapod_sim.core.layout import P_L1, P_L2, P_TMAX, Q0, V0
@@ -21,8 +21,8 @@ from hexapod_sim.core.params import N_LEGS
 
 from .controllers import leg_demand
 
-#: Most cases per block (the block's work arrays stay within a core's L2 cache).
-MAX_BLOCK = 64
+#: Most cases per block: the block arrays' width (their work arrays stay in a core's L2).
+MAX_BLOCK = LANES
 
 
 @njit(cache=True)
@@ -42,13 +42,12 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
     """Run columns 0..n-1 of a block for len(theta_d) ticks from torque zero.
 
     X (STATE_SIZE, B) states, PT (MODEL_SIZE, B) model vectors, codes (B,) controller codes,
-    G (5, B) gains, cols (B,) the case index of each column. Records the sample of tick k
+    G (5, B) gains, cols (B,) the case index of each column; B = batch_physics.LANES. Records the sample of tick k
     into obs_out[case, k - rec_offset] when that row exists (the tick after the last too),
     and sets ok[case].
     """
-    B = X.shape[1]
-    FH, WK, FF, QDD, TR, FLAG = block_scratch(B)
-    TQ = np.zeros((2 * N_LEGS, B))
+    FH, WK, FF, QDD, TR, FLAG = block_scratch()
+    TQ = np.zeros((2 * N_LEGS, LANES))
     n_ticks = theta_d.shape[0]
     n_rec = obs_out.shape[1]
     for k in range(n_ticks + 1):

@@ -28,7 +28,7 @@ from hexapod_sim.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
 from hexapod_sim.core.errors import ParameterError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 
-from .batch_loop import block_plan, run_blocks
+from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controllers import control_law, controller_code, gain_vector
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
@@ -220,7 +220,7 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     ok = np.zeros(len(cases), dtype=np.bool_)
     substeps = np.array([c.params.substeps for c in cases], dtype=np.int64)
     blocks = block_plan(substeps, numba.get_num_threads())
-    width = max(b.size for b in blocks)
+    width = MAX_BLOCK
     # structure of arrays: per block, one row per state / model entry, one column per case
     Xs = np.zeros((len(blocks), S.shape[1], width))
     PTs = np.zeros((len(blocks), Ps.shape[1], width))

@@ -25,134 +25,163 @@ from .layout import (C0, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL, 
                      P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, V0, X0)
 from .params import N_LEGS
 
+#: Columns of every block array. A compile-time row length lets LLVM see that the rows of
+#: one array never overlap, so the loops over cases vectorise with a few alias checks.
+LANES = 64
+
 
 @njit(cache=True)
-def block_scratch(B):  # type: ignore[no-untyped-def]
-    """Work arrays of a block of B cases: (FH (12, B), WK (6, W_SIZE, B), FF (12, B),
-    QDD (24, B), TR (4, B) cos/sin, FLAG (B,) legs to re-solve)."""
+def block_scratch():  # type: ignore[no-untyped-def]
+    """Work arrays of a block, B = LANES: (FH (12, B), WK (6, W_SIZE, B), FF (12, B),
+    QDD (24, B), TR (6, B) cos/sin and contact state, FLAG (B,) legs to re-solve)."""
+    B = LANES
     return (np.empty((2 * N_LEGS, B)), np.empty((N_LEGS, W_SIZE, B)),
-            np.empty((2 * N_LEGS, B)), np.empty((4 * N_LEGS, B)), np.empty((4, B)),
+            np.empty((2 * N_LEGS, B)), np.empty((4 * N_LEGS, B)), np.empty((6, B)),
             np.zeros(B))
+
+
+@njit(cache=True)
+def _flat(A):  # type: ignore[no-untyped-def]
+    """A C-contiguous block array as one row (element [r, b] at r * LANES + b)."""
+    return A.reshape(A.size)
 
 
 @njit(cache=True, error_model="numpy")
 def block_prepare(X, PT, n, FH, WK, TR):  # type: ignore[no-untyped-def]
     """engine.prepare for columns 0..n-1: contact update in X, F_RH into FH, the legs'
     state part into WK."""
+    x, pt, fh, wk, tr = _flat(X), _flat(PT), _flat(FH), _flat(WK), _flat(TR)
+    L = LANES
     for r in range(2 * N_LEGS):
         for b in range(n):
-            FH[r, b] = 0.0
+            fh[r * L + b] = 0.0
     for k in range(LINKS.shape[0]):
         la, lb = LINKS[k, 0], LINKS[k, 1]
+        qa, va, qb, vb = (Q0 + 4 * la) * L, (V0 + 4 * la) * L, (Q0 + 4 * lb) * L, (V0 + 4 * lb) * L
+        xa, xb = (P_HIPX + la) * L, (P_HIPX + lb) * L
         for b in range(n):
-            fx, fy = link_force(X[Q0 + 4 * la, b], X[Q0 + 4 * la + 1, b], X[V0 + 4 * la, b],
-                                X[V0 + 4 * la + 1, b], X[Q0 + 4 * lb, b],
-                                X[Q0 + 4 * lb + 1, b], X[V0 + 4 * lb, b],
-                                X[V0 + 4 * lb + 1, b], PT[P_HIPX + la, b], PT[P_HIPX + lb, b],
-                                PT[P_KBX, b], PT[P_KBY, b], PT[P_BBX, b], PT[P_BBY, b])
-            FH[2 * la, b] += fx
-            FH[2 * la + 1, b] += fy
-            FH[2 * lb, b] -= fx
-            FH[2 * lb + 1, b] -= fy
+            fx, fy = link_force(x[qa + b], x[qa + L + b], x[va + b], x[va + L + b], x[qb + b],
+                                x[qb + L + b], x[vb + b], x[vb + L + b], pt[xa + b], pt[xb + b],
+                                pt[P_KBX * L + b], pt[P_KBY * L + b], pt[P_BBX * L + b],
+                                pt[P_BBY * L + b])
+            fh[2 * la * L + b] += fx
+            fh[(2 * la + 1) * L + b] += fy
+            fh[2 * lb * L + b] -= fx
+            fh[(2 * lb + 1) * L + b] -= fy
     for i in range(N_LEGS):
+        q, v, w = (Q0 + 4 * i) * L, (V0 + 4 * i) * L, i * W_SIZE * L
+        oc, ox = (C0 + i) * L, (X0 + i) * L
         for b in range(n):
-            th1 = X[Q0 + 4 * i + 2, b]
-            th12 = th1 + X[Q0 + 4 * i + 3, b]
-            TR[0, b] = np.cos(th1)
-            TR[1, b] = np.sin(th1)
-            TR[2, b] = np.cos(th12)
-            TR[3, b] = np.sin(th12)
+            th1 = x[q + 2 * L + b]
+            th12 = th1 + x[q + 3 * L + b]
+            tr[b] = np.cos(th1)
+            tr[L + b] = np.sin(th1)
+            tr[2 * L + b] = np.cos(th12)
+            tr[3 * L + b] = np.sin(th12)
         for b in range(n):
-            c1, s1, c12, s12 = TR[0, b], TR[1, b], TR[2, b], TR[3, b]
-            w1, w2 = X[V0 + 4 * i + 2, b], X[V0 + 4 * i + 3, b]
-            l1, l2 = PT[P_L1, b], PT[P_L2, b]
+            c1, s1, c12, s12 = tr[b], tr[L + b], tr[2 * L + b], tr[3 * L + b]
+            w1, w2 = x[v + 2 * L + b], x[v + 3 * L + b]
+            l1, l2 = pt[P_L1 * L + b], pt[P_L2 * L + b]
             dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
-            x, y = X[Q0 + 4 * i, b] + dx, X[Q0 + 4 * i + 1, b] + dy
-            c, xt = update_contact(x, y, X[C0 + i, b], X[X0 + i, b])
-            X[C0 + i, b] = c
-            X[X0 + i, b] = xt
+            xf, yf = x[q + b] + dx, x[q + L + b] + dy
+            c, xt = update_contact(xf, yf, x[oc + b], x[ox + b])
+            tr[4 * L + b] = c  # into X after the loop: stores to X here would stop LLVM
+            tr[5 * L + b] = xt  # from vectorising (it cannot tell X's rows apart)
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
-            vx, vy = X[V0 + 4 * i, b] + dvx, X[V0 + 4 * i + 1, b] + dvy
-            bx, by = PT[P_BGX, b], PT[P_BGY, b]
-            fx = -PT[P_KGX, b] * (x - xt) - bx * vx
-            fy = -PT[P_KGY, b] * y - by * vy
-            h = PT[P_DT, b] if PT[P_IMPL, b] != 0.0 else 0.0
+            vx, vy = x[v + b] + dvx, x[v + L + b] + dvy
+            bx, by = pt[P_BGX * L + b], pt[P_BGY * L + b]
+            fx = -pt[P_KGX * L + b] * (xf - xt) - bx * vx
+            fy = -pt[P_KGY * L + b] * yf - by * vy
+            h = pt[P_DT * L + b] if pt[P_IMPL * L + b] != 0.0 else 0.0
             if c == 0.0:  # in flight: no ground force, the plain solve (engine.prepare)
                 fx, fy, bx, by, h = 0.0, 0.0, 0.0, 0.0, 0.0
-            factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, PT[P_MH, b],
-                                              PT[P_MK, b], PT[P_MF, b], PT[P_G, b], bx, by, h)
-            for k in range(10):
-                WK[i, W_FACTOR + k, b] = factor[k]
-            for k in range(4):
-                WK[i, W_BIAS + k, b] = bias[k]
-                WK[i, W_JAC + k, b] = jac[k]
-            WK[i, W_FG, b] = fx
-            WK[i, W_FG + 1, b] = fy
-            WK[i, W_CS, b] = c1
-            WK[i, W_CS + 1, b] = s1
-            WK[i, W_CS + 2, b] = c12
-            WK[i, W_CS + 3, b] = s12
-            WK[i, W_W, b] = w1
-            WK[i, W_W + 1, b] = w2
+            factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2,
+                                              pt[P_MH * L + b], pt[P_MK * L + b],
+                                              pt[P_MF * L + b], pt[P_G * L + b], bx, by, h)
+            d0, d1, d2, d3, l10, l20, l30, l21, l31, l32 = factor
+            f = w + W_FACTOR * L + b
+            wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L] = d0, d1, d2, d3
+            wk[f + 4 * L], wk[f + 5 * L], wk[f + 6 * L] = l10, l20, l30
+            wk[f + 7 * L], wk[f + 8 * L], wk[f + 9 * L] = l21, l31, l32
+            f = w + W_BIAS * L + b
+            wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L] = bias
+            f = w + W_JAC * L + b
+            wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L] = jac
+            f = w + W_FG * L + b
+            wk[f], wk[f + L] = fx, fy
+            f = w + W_CS * L + b
+            wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L] = c1, s1, c12, s12
+            f = w + W_W * L + b
+            wk[f], wk[f + L] = w1, w2
+        for b in range(n):
+            x[oc + b] = tr[4 * L + b]
+            x[ox + b] = tr[5 * L + b]
 
 
 @njit(cache=True, error_model="numpy")
 def block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG):  # type: ignore[no-untyped-def]
     """engine.solve for columns 0..n-1: F_RF into FF, ddq into QDD under torques TQ."""
+    x, tq, pt, fh, wk = _flat(X), _flat(TQ), _flat(PT), _flat(FH), _flat(WK)
+    ff, qdd = _flat(FF), _flat(QDD)
+    L = LANES
     for i in range(N_LEGS):
+        w, oc, t, a = i * W_SIZE * L, (C0 + i) * L, 2 * i * L, 4 * i * L
         any_limited = False
         for b in range(n):
-            factor = (WK[i, 0, b], WK[i, 1, b], WK[i, 2, b], WK[i, 3, b], WK[i, 4, b],
-                      WK[i, 5, b], WK[i, 6, b], WK[i, 7, b], WK[i, 8, b], WK[i, 9, b])
-            bias = (WK[i, W_BIAS, b], WK[i, W_BIAS + 1, b], WK[i, W_BIAS + 2, b],
-                    WK[i, W_BIAS + 3, b])
-            af, bf, ja2, jb2 = (WK[i, W_JAC, b], WK[i, W_JAC + 1, b], WK[i, W_JAC + 2, b],
-                                WK[i, W_JAC + 3, b])
-            fx0, fy0 = WK[i, W_FG, b], WK[i, W_FG + 1, b]
-            a0, a1, a2, a3 = leg_solve(factor, bias, (af, bf, ja2, jb2), TQ[2 * i, b],
-                                       TQ[2 * i + 1, b], FH[2 * i, b], FH[2 * i + 1, b],
-                                       fx0, fy0)
+            f = w + W_FACTOR * L + b
+            factor = (wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L], wk[f + 4 * L],
+                      wk[f + 5 * L], wk[f + 6 * L], wk[f + 7 * L], wk[f + 8 * L], wk[f + 9 * L])
+            f = w + W_BIAS * L + b
+            bias = (wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L])
+            f = w + W_JAC * L + b
+            af, bf, ja2, jb2 = wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L]
+            fx0, fy0 = wk[w + W_FG * L + b], wk[w + (W_FG + 1) * L + b]
+            a0, a1, a2, a3 = leg_solve(factor, bias, (af, bf, ja2, jb2), tq[t + b],
+                                       tq[t + L + b], fh[t + b], fh[t + L + b], fx0, fy0)
             # engine.leg_contact_solve: ground damping at the end-of-step velocity, limits
-            h = PT[P_DT, b] if PT[P_IMPL, b] != 0.0 else 0.0
+            h = pt[P_DT * L + b] if pt[P_IMPL * L + b] != 0.0 else 0.0
             fx, fy = fx0, fy0
             if h > 0.0:
-                fx = fx0 - PT[P_BGX, b] * (h * (a0 + af * a2 + ja2 * a3))
-                fy = fy0 - PT[P_BGY, b] * (h * (a1 + bf * a2 + jb2 * a3))
-            lx, ly = limit_force(fx, fy, PT[P_MU, b])
-            contact = X[C0 + i, b] != 0.0
+                fx = fx0 - pt[P_BGX * L + b] * (h * (a0 + af * a2 + ja2 * a3))
+                fy = fy0 - pt[P_BGY * L + b] * (h * (a1 + bf * a2 + jb2 * a3))
+            lx, ly = limit_force(fx, fy, pt[P_MU * L + b])
+            contact = x[oc + b] != 0.0
             limited = contact and (lx != fx or ly != fy)
             if not contact:
                 lx, ly = 0.0, 0.0
-            FF[2 * i, b] = lx
-            FF[2 * i + 1, b] = ly
-            QDD[4 * i, b] = a0
-            QDD[4 * i + 1, b] = a1
-            QDD[4 * i + 2, b] = a2
-            QDD[4 * i + 3, b] = a3
+            ff[t + b] = lx
+            ff[t + L + b] = ly
+            qdd[a + b] = a0
+            qdd[a + L + b] = a1
+            qdd[a + 2 * L + b] = a2
+            qdd[a + 3 * L + b] = a3
             FLAG[b] = 1.0 if limited else 0.0
             any_limited |= limited
         if any_limited:
             for b in range(n):
                 if FLAG[b] != 0.0:
-                    r = leg_accel_cs(WK[i, W_CS, b], WK[i, W_CS + 1, b], WK[i, W_CS + 2, b],
-                                     WK[i, W_CS + 3, b], WK[i, W_W, b], WK[i, W_W + 1, b],
-                                     PT[P_L1, b], PT[P_L2, b], PT[P_MH, b], PT[P_MK, b],
-                                     PT[P_MF, b], PT[P_G, b], TQ[2 * i, b], TQ[2 * i + 1, b],
-                                     FH[2 * i, b], FH[2 * i + 1, b], FF[2 * i, b],
-                                     FF[2 * i + 1, b], 0.0, 0.0, 0.0)
+                    f = w + W_CS * L + b
+                    r = leg_accel_cs(wk[f], wk[f + L], wk[f + 2 * L], wk[f + 3 * L],
+                                     wk[w + W_W * L + b], wk[w + (W_W + 1) * L + b],
+                                     pt[P_L1 * L + b], pt[P_L2 * L + b], pt[P_MH * L + b],
+                                     pt[P_MK * L + b], pt[P_MF * L + b], pt[P_G * L + b],
+                                     tq[t + b], tq[t + L + b], fh[t + b], fh[t + L + b],
+                                     ff[t + b], ff[t + L + b], 0.0, 0.0, 0.0)
                     for j in range(4):
-                        QDD[4 * i + j, b] = r[j]
+                        qdd[a + j * L + b] = r[j]
 
 
 @njit(cache=True)
 def block_integrate(X, PT, n, QDD):  # type: ignore[no-untyped-def]
     """engine.advance_prepared's update: dq += dt ddq, then q += dt dq (columns 0..n-1)."""
+    x, pt, qdd = _flat(X), _flat(PT), _flat(QDD)
+    L = LANES
     for r in range(4 * N_LEGS):
         for b in range(n):
-            dt = PT[P_DT, b]
-            v = X[V0 + r, b] + dt * QDD[r, b]
-            X[V0 + r, b] = v
-            X[Q0 + r, b] += dt * v
+            dt = pt[P_DT * L + b]
+            vel = x[(V0 + r) * L + b] + dt * qdd[r * L + b]
+            x[(V0 + r) * L + b] = vel
+            x[(Q0 + r) * L + b] += dt * vel
 
 
 @njit(cache=True)
@@ -160,9 +189,9 @@ def block_sample(X, TQ, PT, b, FH, WK, FF, QDD, obs):  # type: ignore[no-untyped
     """engine.observe_prepared's sample of column b (after block_prepare and block_solve
     with the held torque) into ``obs`` (9, 6, 2)."""
     for i in range(N_LEGS):
-        sample = leg_sample(X[Q0 + 4 * i, b], X[Q0 + 4 * i + 1, b], X[Q0 + 4 * i + 2, b],
-                            X[Q0 + 4 * i + 3, b], X[V0 + 4 * i, b], X[V0 + 4 * i + 1, b],
-                            X[V0 + 4 * i + 2, b], X[V0 + 4 * i + 3, b], WK[i, W_CS, b],
+        q, v = Q0 + 4 * i, V0 + 4 * i
+        sample = leg_sample(X[q, b], X[q + 1, b], X[q + 2, b], X[q + 3, b], X[v, b],
+                            X[v + 1, b], X[v + 2, b], X[v + 3, b], WK[i, W_CS, b],
                             WK[i, W_CS + 1, b], WK[i, W_CS + 2, b], WK[i, W_CS + 3, b],
                             TQ[2 * i, b], TQ[2 * i + 1, b], FF[2 * i, b], FF[2 * i + 1, b],
                             QDD[4 * i, b], QDD[4 * i + 1, b], FH[2 * i, b], FH[2 * i + 1, b],
@@ -179,5 +208,5 @@ def swap_columns(A, a, b):  # type: ignore[no-untyped-def]
         A[r, a], A[r, b] = A[r, b], A[r, a]
 
 
-__all__ = ["block_integrate", "block_prepare", "block_sample", "block_scratch", "block_solve",
+__all__ = ["LANES", "block_integrate", "block_prepare", "block_sample", "block_scratch", "block_solve",
            "swap_columns"]
