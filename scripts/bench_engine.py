@@ -4,9 +4,8 @@
 S1  one closed-loop rollout of the base case (10 kHz physics, 1 kHz control), serial, both
     controllers: simulated seconds per wall second, median of 5 after a warm-up compile.
 S2  the batched engine (closed_loop.run_batch: structure-of-arrays blocks of cases, prange
-    over blocks, all cores): a ground
-    sweep x both controllers, simulated seconds summed over cases per wall second, median
-    of 3.
+    over blocks, all cores): a ground sweep x both controllers, simulated seconds summed
+    over cases per wall second, median of 3.
 S3  physics step rate against the same planar model in MuJoCo (hexapod_sim.mujoco_model,
     same dt, contacts off): one leg (our compiled step loop vs mj_step from a Python loop,
     mj_step(nstep=N) and mujoco.rollout), six legs (engine.advance vs the six-leg MuJoCo
