@@ -3,9 +3,9 @@
 
 S1  one closed-loop rollout of the base case (10 kHz physics, 1 kHz control), serial, both
     controllers: simulated seconds per wall second, median of 5 after a warm-up compile.
-S2  the batched engine (closed_loop.run_batch, numba prange over cases, all cores): a ground
-    sweep x both controllers, simulated seconds summed over cases per wall second, median
-    of 3.
+S2  the batched engine (closed_loop.run_batch: structure-of-arrays blocks of cases, prange
+    over blocks, all cores): a ground sweep x both controllers, simulated seconds summed
+    over cases per wall second, median of 3.
 S3  physics step rate against the same planar model in MuJoCo (hexapod_sim.mujoco_model,
     same dt, contacts off): one leg (our compiled step loop vs mj_step from a Python loop,
     mj_step(nstep=N) and mujoco.rollout), six legs (engine.advance vs the six-leg MuJoCo
@@ -17,7 +17,7 @@ average is printed before and after, and S1/S2 are also given per CPU second (wh
 core would give), next to the per-wall-second figure the targets define. The full run takes
 about 1.5 min on a busy 2-core machine; ``--quick`` about 20 s.
 
-Usage:  python scripts/bench_engine.py [--quick] [--json FILE]
+Usage:  python scripts/bench_engine.py [--quick] [--no-s3] [--json FILE]
 """
 from __future__ import annotations
 
@@ -327,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="short run (~20 s), fewer repetitions")
     ap.add_argument("--json", metavar="FILE", help="also write every raw figure to FILE")
+    ap.add_argument("--no-s3", action="store_true",
+                    help="skip S3 (MuJoCo comparison): S1 and S2 only")
     args = ap.parse_args(argv)
     q = args.quick
     p = load_params()
@@ -376,7 +378,9 @@ def main(argv: list[str] | None = None) -> int:
         _row(rows, "S2", "  same on 1 thread (parallel scaling)", f">= {S2_TARGET:g}",
              f"{m1:.0f}", f"{m1 / S2_TARGET:.2f}")
 
-    if mujoco is None:
+    if args.no_s3:
+        _row(rows, "S3", "MuJoCo comparison", "-", "not measured: --no-s3", "-")
+    elif mujoco is None:
         _row(rows, "S3", "MuJoCo comparison", "-", "not measured: mujoco not installed", "-")
     else:
         t0 = time.perf_counter()
@@ -416,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
     print("  ".join("-" * w[i] for i in range(4)) + "  " + "-" * len(header[4]))
     for r in rows:
         print("  ".join(r[i].ljust(w[i]) for i in range(5)))
-    if mujoco is not None:
+    if "s3" in raw:
         med = {k: _median(v) for k, v in raw["s3"].items()}
         print("\nS3 step rates (median, steps / wall s): " + ", ".join(
             f"{k} {_fmt_rate(v)}" for k, v in med.items()))

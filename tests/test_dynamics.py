@@ -58,7 +58,8 @@ def test_energy_drift_shrinks_with_dt():
     drifts = []
     for dt in (2e-4, 1e-4):
         p = load_params(**{"ground.k_x": 0.0, "ground.k_y": 0.0, "ground.b_x": 0.0,
-                           "ground.b_y": 0.0, "body.b_x": 0.0, "body.b_y": 0.0, "sim.dt": dt})
+                           "ground.b_y": 0.0, "body.b_x": 0.0, "body.b_y": 0.0, "sim.dt": dt,
+                           "sim.control_period": 1e-3})  # a multiple of both steps
         P = model_vector(p)
         s = initial_state(p)
         s[24:48] += np.random.default_rng(4).normal(scale=0.5, size=24)

@@ -5,8 +5,11 @@ import numpy as np
 import pytest
 
 from hexapod_control.core.closed_loop import Case, run
+from hexapod_control.core.controllers import control_law, controller_code, gain_vector
 from hexapod_metrics.core.indices import INDEX_NAMES
 from hexapod_metrics.core.simulate import evaluate_batch, simulate
+from hexapod_sim.core.actuator import saturate
+from hexapod_sim.core.engine import Physics
 from hexapod_sim.core.params import load_params
 
 
@@ -38,7 +41,15 @@ def test_batch_equals_one_by_one():
     cases = [Case(p, "pd_p"), Case(p, "pd_pf"),
              Case(p.with_values(**{"ground.scale": 0.3, "actuator.t_max": 170.0}), "pd_pf"),
              Case(p.with_values(**{"ground.scale": 3.0, "actuator.t_max": math.inf}), "pd_p"),
-             Case(p.with_values(**{"pd_p.kp1": 30000.0}), "pd_p")]
+             Case(p.with_values(**{"pd_p.kp1": 30000.0}), "pd_p"),
+             # one batch, three physics steps: dt, 2 dt and dt / 2 (substeps differ)
+             Case(p.with_values(**{"sim.dt": 2 * p.sim.dt}), "pd_pf"),
+             Case(p.with_values(**{"sim.dt": p.sim.dt / 2}), "pd_p"),
+             Case(p.with_values(**{"actuator.t_max": math.inf}), "pd_pf"),
+             Case(p.with_values(**{"ground.friction_mu": 0.3}), "pd_pf"),
+             Case(p.with_values(**{"ground.friction_mu": 0.3, "sim.dt": p.sim.dt / 2,
+                                   "actuator.t_max": 170.0}), "pd_p")]
+    assert len({c.params.substeps for c in cases}) == 3
     batch = evaluate_batch(cases, 3.0)
     for c, b in zip(cases, batch):
         one = simulate(c.params, c.controller, 3.0)
@@ -47,6 +58,30 @@ def test_batch_equals_one_by_one():
         for name in INDEX_NAMES + ("L",):
             assert getattr(b.indices, name) == pytest.approx(getattr(one.indices, name),
                                                              rel=1e-12, abs=1e-15)
+
+
+def test_stepping_object_equals_closed_loop_bit_for_bit():
+    """Physics.observe / advance_tick (the sim node's path, which shares the observation's
+    state part with the next step) gives the compiled closed loop's samples exactly."""
+    p = load_params()
+    n = 400
+    for controller in ("pd_p", "pd_pf"):
+        loop = run(p, controller, n * p.sim.control_period)
+        phys = Physics(p)
+        code, gains = controller_code(controller), gain_vector(p.gains(controller))
+        l1, l2 = p.robot.leg_length_1, p.robot.leg_length_2
+        demand, torque = np.empty((6, 2)), np.empty((6, 2))
+        samples = []
+        for k in range(n):
+            obs = phys.observe()
+            samples.append(obs)
+            control_law(code, gains, obs, loop.reference.theta[k], loop.reference.theta_vel[k],
+                        l1, l2, demand)
+            np.testing.assert_array_equal(demand, loop.command[k])
+            saturate(demand, p.actuator.t_max, torque)
+            phys.advance_tick(torque)
+        samples.append(phys.observe())
+        np.testing.assert_array_equal(np.array(samples), loop.obs)
 
 
 def test_runs_are_deterministic():
@@ -63,6 +98,24 @@ def test_divergence_is_reported_not_scored():
     batch = evaluate_batch([Case(p, "pd_pf"), Case(load_params(), "pd_pf")], 3.0)
     assert [o.status for o in batch] == ["diverged", "ok"]
     assert batch[0].indices is None and batch[1].indices is not None
+
+
+def test_diverged_case_leaves_its_block_without_touching_the_others():
+    """A case that blows up mid-run drops out of its block (its column is swapped out);
+    the cases beside it, before and after it, still give their single runs' numbers."""
+    p = load_params()
+    bad = p.with_values(**{"body.k_x": 1e11})
+    cases = [Case(p, "pd_pf"), Case(bad, "pd_pf"),
+             Case(p.with_values(**{"ground.scale": 2.0}), "pd_p"), Case(bad, "pd_p"),
+             Case(p.with_values(**{"actuator.t_max": 150.0}), "pd_pf")]
+    batch = evaluate_batch(cases, 3.0)
+    assert [o.status for o in batch] == ["ok", "diverged", "ok", "diverged", "ok"]
+    for c, b in zip(cases, batch):
+        if b.status == "ok":
+            one = simulate(c.params, c.controller, 3.0)
+            for name in INDEX_NAMES + ("L",):
+                assert getattr(b.indices, name) == pytest.approx(
+                    getattr(one.indices, name), rel=1e-12, abs=1e-15)
 
 
 def test_walks_forward_at_commanded_speed():

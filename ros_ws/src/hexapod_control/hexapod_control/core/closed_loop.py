@@ -6,8 +6,9 @@ Per control tick k (period Delta t, ``p.substeps`` physics steps):
 The ROS graph does exactly the same across processes (sim node / controller node), with the
 same compiled functions, so a lockstep graph run reproduces these numbers.
 
-Batch runs (:func:`run_batch`) execute many parameter sets in parallel (numba ``prange``, one
-case per thread); a diverged case is reported as diverged, its samples are not used.
+Batch runs (:func:`run_batch`) execute many parameter sets at once: blocks of cases with the
+case index innermost (batch_loop.py), blocks in parallel; every case gets the numbers of its
+single run. A diverged case is reported as diverged, its samples are not used.
 """
 from __future__ import annotations
 
@@ -16,15 +17,18 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from numba import njit, prange
+import numba
+from numba import njit
 
 from hexapod_sim.core.actuator import saturate
-from hexapod_sim.core.engine import advance, initial_state, observe
+from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
+                                     scratch)
 from hexapod_sim.core.gait import Reference, reference
 from hexapod_sim.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
 from hexapod_sim.core.errors import ParameterError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 
+from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controllers import control_law, controller_code, gain_vector
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
@@ -44,37 +48,22 @@ def run_ticks(s, P, code, gains, theta_d, theta_vel_d, torque, substeps, k0, obs
     """
     obs = np.empty((9, N_LEGS, 2))
     demand = np.empty((N_LEGS, 2))
+    fh, work, ff, qdd = scratch()
     l1, l2, t_max = P[P_L1], P[P_L2], P[P_TMAX]
     n = theta_d.shape[0]
     for j in range(n):
-        observe(s, torque, P, obs)
+        # the observation's state part (trig, body and ground forces, factored mass
+        # matrix) is the first physics step's: computed once, used by both
+        observe_prepared(s, torque, P, obs, fh, work, ff, qdd)
         control_law(code, gains, obs, theta_d[j], theta_vel_d[j], l1, l2, demand)
         r = k0 + j - rec_offset
         if 0 <= r < obs_out.shape[0]:
             obs_out[r] = obs
             cmd_out[r] = demand
         saturate(demand, t_max, torque)
-        if not advance(s, torque, P, substeps):
+        if not advance_prepared(s, torque, P, substeps, fh, work, ff, qdd):
             return j
     return n
-
-
-@njit(cache=True, parallel=True)
-def _batch_kernel(S, Ps, codes, G, theta_d, theta_vel_d, substeps, rec_offset, obs_out,  # type: ignore[no-untyped-def]
-                  ok):
-    n_ticks = theta_d.shape[0]
-    for c in prange(S.shape[0]):
-        torque = np.zeros((N_LEGS, 2))
-        cmd = np.empty((obs_out.shape[1], N_LEGS, 2))
-        done = run_ticks(S[c], Ps[c], codes[c], G[c], theta_d, theta_vel_d, torque,
-                         substeps[c], 0, obs_out[c], cmd, rec_offset)
-        if done == n_ticks:
-            last = n_ticks - rec_offset
-            if 0 <= last < obs_out.shape[1]:
-                observe(S[c], torque, Ps[c], obs_out[c, last])
-            ok[c] = True
-        else:
-            ok[c] = False
 
 
 @dataclass(frozen=True)
@@ -230,7 +219,22 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
     substeps = np.array([c.params.substeps for c in cases], dtype=np.int64)
-    _batch_kernel(S, Ps, codes, G, ref.theta[:n], ref.theta_vel[:n], substeps, k_a, obs, ok)
+    blocks = block_plan(substeps, numba.get_num_threads())
+    width = MAX_BLOCK
+    # structure of arrays: per block, one row per state / model entry, one column per case
+    Xs = np.zeros((len(blocks), S.shape[1], width))
+    PTs = np.zeros((len(blocks), Ps.shape[1], width))
+    Gs = np.zeros((len(blocks), G.shape[1], width))
+    Cs = np.zeros((len(blocks), width), dtype=np.int64)
+    cols = np.zeros((len(blocks), width), dtype=np.int64)
+    for j, idx in enumerate(blocks):
+        m = idx.size
+        Xs[j, :, :m], PTs[j, :, :m], Gs[j, :, :m] = S[idx].T, Ps[idx].T, G[idx].T
+        Cs[j, :m], cols[j, :m] = codes[idx], idx
+    counts = np.array([b.size for b in blocks], dtype=np.int64)
+    block_substeps = np.array([substeps[b[0]] for b in blocks], dtype=np.int64)
+    run_blocks(Xs, PTs, Cs, Gs, counts, ref.theta[:n], ref.theta_vel[:n], block_substeps, k_a,
+               obs, cols, ok)
     window_ref = Reference(*(a[k_a:] for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
 

@@ -33,6 +33,19 @@ def gain_vector(g: GainParams) -> np.ndarray:
 
 
 @njit(cache=True)
+def leg_demand(code, kp1, kd1, kp2, kd2, kf, th1, th2, w1, w2, ffx, ffy,  # type: ignore[no-untyped-def]
+               thd1, thd2, wd1, wd2, l1, l2):
+    """Demanded torques (T_C1, T_C2) (N m) of one leg: joint angles th (rad) and rates w
+    (rad/s), measured foot force (ffx, ffy) (N, used by PD_PF), references thd, wd."""
+    tau1, tau2 = 0.0, 0.0
+    if code == PD_PF:
+        tau1, tau2 = foot_force_torque(th1, th2, ffx, ffy, l1, l2)
+    g1 = kp1 * (thd1 - th1) + kd1 * (wd1 - w1)
+    g2 = kp2 * (thd2 - th2) + kd2 * (wd2 - w2)
+    return kf * (g1 - tau1), kf * (g2 - tau2)
+
+
+@njit(cache=True)
 def control_law(code, gains, obs, theta_d, theta_vel_d, l1, l2, out):  # type: ignore[no-untyped-def]
     """Demanded torques T_C (6, 2) (N m) into ``out``.
 
@@ -40,16 +53,12 @@ def control_law(code, gains, obs, theta_d, theta_vel_d, l1, l2, out):  # type: i
     (uses joint angles, joint rates and measured foot forces); theta_d, theta_vel_d: (6, 2)
     references (rad, rad/s); l1, l2: link lengths (m).
     """
-    kf = gains[4]
     for i in range(obs.shape[1]):
-        th1, th2 = obs[O_TH, i, 0], obs[O_TH, i, 1]
-        tau1, tau2 = 0.0, 0.0
-        if code == PD_PF:
-            tau1, tau2 = foot_force_torque(th1, th2, obs[O_FF, i, 0], obs[O_FF, i, 1], l1, l2)
-        g1 = gains[0] * (theta_d[i, 0] - th1) + gains[1] * (theta_vel_d[i, 0] - obs[O_THV, i, 0])
-        g2 = gains[2] * (theta_d[i, 1] - th2) + gains[3] * (theta_vel_d[i, 1] - obs[O_THV, i, 1])
-        out[i, 0] = kf * (g1 - tau1)
-        out[i, 1] = kf * (g2 - tau2)
+        out[i, 0], out[i, 1] = leg_demand(
+            code, gains[0], gains[1], gains[2], gains[3], gains[4], obs[O_TH, i, 0],
+            obs[O_TH, i, 1], obs[O_THV, i, 0], obs[O_THV, i, 1], obs[O_FF, i, 0],
+            obs[O_FF, i, 1], theta_d[i, 0], theta_d[i, 1], theta_vel_d[i, 0],
+            theta_vel_d[i, 1], l1, l2)
 
 
-__all__ = ["PD_P", "PD_PF", "control_law", "controller_code", "gain_vector"]
+__all__ = ["PD_P", "PD_PF", "control_law", "controller_code", "gain_vector", "leg_demand"]

@@ -5,13 +5,18 @@ from numba import njit
 
 
 @njit(cache=True)
+def clip_torque(v, t_max):  # type: ignore[no-untyped-def]
+    """clip(v, -t_max, t_max) of one joint torque (N m)."""
+    if v > t_max:
+        v = t_max
+    elif v < -t_max:
+        v = -t_max
+    return v
+
+
+@njit(cache=True)
 def saturate(demand, t_max, out):  # type: ignore[no-untyped-def]
     """Write clip(demand, -t_max, t_max) into ``out``; both (6, 2) arrays of joint torques (N m)."""
     for i in range(demand.shape[0]):
         for j in range(demand.shape[1]):
-            v = demand[i, j]
-            if v > t_max:
-                v = t_max
-            elif v < -t_max:
-                v = -t_max
-            out[i, j] = v
+            out[i, j] = clip_torque(demand[i, j], t_max)

@@ -54,9 +54,11 @@ def leg_terms_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf,  # type: ignore[n
 
 
 @njit(cache=True, error_model="numpy")
-def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore[no-untyped-def]
-               r0, r1, r2, r3):
-    """Solve A x = r for a symmetric positive definite 4x4 A (upper triangle given), by LDL^T."""
+def factor_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):  # type: ignore[no-untyped-def]
+    """LDL^T factor of a symmetric positive definite 4x4 A (upper triangle given).
+
+    Returns (d0, d1, d2, d3, l10, l20, l30, l21, l31, l32) for :func:`subst_spd4`.
+    """
     d0 = a00
     l10 = a01 / d0
     l20 = a02 / d0
@@ -67,6 +69,13 @@ def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore
     d2 = a22 - l20 * l20 * d0 - l21 * l21 * d1
     l32 = (a23 - l30 * l20 * d0 - l31 * l21 * d1) / d2
     d3 = a33 - l30 * l30 * d0 - l31 * l31 * d1 - l32 * l32 * d2
+    return d0, d1, d2, d3, l10, l20, l30, l21, l31, l32
+
+
+@njit(cache=True, error_model="numpy")
+def subst_spd4(f, r0, r1, r2, r3):  # type: ignore[no-untyped-def]
+    """Solve A x = r given the factor ``f`` of A from :func:`factor_spd4`."""
+    d0, d1, d2, d3, l10, l20, l30, l21, l31, l32 = f
     y0 = r0
     y1 = r1 - l10 * y0
     y2 = r2 - l20 * y0 - l21 * y1
@@ -78,12 +87,55 @@ def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore
     return x0, x1, x2, x3
 
 
+@njit(cache=True, error_model="numpy")
+def solve_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33,  # type: ignore[no-untyped-def]
+               r0, r1, r2, r3):
+    """Solve A x = r for a symmetric positive definite 4x4 A (upper triangle given), by LDL^T."""
+    return subst_spd4(factor_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33),
+                      r0, r1, r2, r3)
+
+
 @njit(cache=True)
 def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ignore[no-untyped-def]
               fhx, fhy, ffx, ffy, bx, by, h):
     """ddq of one leg at joint angles (th1, th2): see :func:`leg_accel_cs`."""
     return leg_accel_cs(np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2),
                         w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h)
+
+
+@njit(cache=True, error_model="numpy")
+def leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ignore[no-untyped-def]
+                  bx, by, h):
+    """The state part of :func:`leg_accel_cs`: everything that does not depend on forces.
+
+    Returns (factor, bias, jac): the LDL^T factor (see :func:`factor_spd4`) of
+    H + h J_F^T diag(bx, by) J_F, the bias b = c + g (b0, b1, b2, b3) (N, N, N m, N m) and
+    the foot Jacobian's angle columns (af, bf, a2, b2) (m) with J_F = [[1, 0, af, a2],
+    [0, 1, bf, b2]]. :func:`leg_solve` turns them and the forces into ddq.
+    """
+    m, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms_cs(
+        c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav)
+    a2, b2 = l2 * c12, l2 * s12
+    af, bf = l1 * c1 + a2, l1 * s1 + b2
+    # J_F = [[1, 0, af, a2], [0, 1, bf, b2]]; D = h J_F^T diag(bx, by) J_F
+    hx, hy = h * bx, h * by
+    factor = factor_spd4(
+        m + hx, 0.0, h02 + hx * af, h03 + hx * a2,
+        m + hy, h12 + hy * bf, h13 + hy * b2,
+        h22 + hx * af * af + hy * bf * bf, h23 + hx * af * a2 + hy * bf * b2,
+        h33 + hx * a2 * a2 + hy * b2 * b2)
+    return factor, (bb0, bb1, bb2, bb3), (af, bf, a2, b2)
+
+
+@njit(cache=True, error_model="numpy")
+def leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, ffx, ffy):  # type: ignore[no-untyped-def]
+    """The force part of :func:`leg_accel_cs`: ddq from the state part of
+    :func:`leg_system_cs`, joint torques tm1, tm2 (N m), the body force (fhx, fhy) on the hip
+    and the ground force (ffx, ffy) on the foot (N). Returns (ddx_H, ddy_H, ddth1, ddth2)."""
+    bb0, bb1, bb2, bb3 = bias
+    af, bf, a2, b2 = jac
+    return subst_spd4(factor, fhx + ffx - bb0, fhy + ffy - bb1,
+                      tm1 + af * ffx + bf * ffy - bb2, tm2 + a2 * ffx + b2 * ffy - bb3)
 
 
 @njit(cache=True, error_model="numpy")
@@ -95,21 +147,13 @@ def leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ig
     force on the foot at the current velocity (N). (bx, by) (N s/m) and h (s): ground damping
     taken linearly implicit over a step h, i.e. F_RF = F - h B J_F ddq, which gives
     (H + h J_F^T B J_F) ddq = rhs. h = 0 is the plain explicit solve.
-    Returns (ddx_H, ddy_H, ddtheta1, ddtheta2).
+    Returns (ddx_H, ddy_H, ddtheta1, ddtheta2). It is :func:`leg_system_cs` followed by
+    :func:`leg_solve`, which the engine calls separately to share the first between the
+    observation and the next step.
     """
-    m, h02, h03, h12, h13, h22, h23, h33, bb0, bb1, bb2, bb3 = leg_terms_cs(
-        c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav)
-    a2, b2 = l2 * c12, l2 * s12
-    af, bf = l1 * c1 + a2, l1 * s1 + b2
-    # J_F = [[1, 0, af, a2], [0, 1, bf, b2]]; D = h J_F^T diag(bx, by) J_F
-    hx, hy = h * bx, h * by
-    return solve_spd4(
-        m + hx, 0.0, h02 + hx * af, h03 + hx * a2,
-        m + hy, h12 + hy * bf, h13 + hy * b2,
-        h22 + hx * af * af + hy * bf * bf, h23 + hx * af * a2 + hy * bf * b2,
-        h33 + hx * a2 * a2 + hy * b2 * b2,
-        fhx + ffx - bb0, fhy + ffy - bb1,
-        tm1 + af * ffx + bf * ffy - bb2, tm2 + a2 * ffx + b2 * ffy - bb3)
+    factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,
+                                      bx, by, h)
+    return leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, ffx, ffy)
 
 
 def mass_matrix(q: np.ndarray, l1: float, l2: float, mh: float, mk: float,
@@ -127,5 +171,5 @@ def bias_forces(q: np.ndarray, dq: np.ndarray, l1: float, l2: float, mh: float, 
     return np.array(leg_terms(q[2], q[3], dq[2], dq[3], l1, l2, mh, mk, mf, grav)[8:])
 
 
-__all__ = ["bias_forces", "leg_accel", "leg_accel_cs", "leg_terms", "leg_terms_cs", "mass_matrix",
-           "solve_spd4"]
+__all__ = ["bias_forces", "factor_spd4", "leg_accel", "leg_accel_cs", "leg_solve", "leg_system_cs",
+           "leg_terms", "leg_terms_cs", "mass_matrix", "solve_spd4", "subst_spd4"]

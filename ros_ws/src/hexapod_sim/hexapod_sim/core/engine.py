@@ -24,14 +24,13 @@ from numba import njit
 
 from .body import body_forces
 from .contact import limit_force, update_contact
-from .dynamics import leg_accel_cs
+from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .errors import DivergenceError
 from .gait import reference
 from .kinematics import foot_offset_cs, foot_velocity_cs
-from .layout import (C0, O_FF, O_FP, O_FV, O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ,
-                     OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL, P_KBX,
-                     P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
-                     model_vector)
+from .layout import (C0, OBS_FIELDS, OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX,
+                     P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0,
+                     STATE_SIZE, V0, X0, model_vector)
 from .params import N_LEGS, HexapodParams
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
@@ -39,42 +38,28 @@ MAX_COORD = 1e4
 MAX_RATE = 1e4
 
 
-@njit(cache=True, error_model="numpy")
-def leg_contact_accel(c1, s1, c12, s12, w1, w2, P, tm1, tm2, fhx, fhy,  # type: ignore[no-untyped-def]
-                      x, y, vx, vy, x_touch, h):
-    """Accelerations of a leg whose foot is in contact, and the ground force it feels.
+#: Per-leg columns of the engine's work array (the state part of a step, see :func:`prepare`).
+W_FACTOR, W_BIAS, W_JAC, W_FG, W_CS, W_W = 0, 10, 14, 18, 20, 24
+W_SIZE = 26
 
-    c1, s1, c12, s12: cos/sin of theta1 and theta1 + theta2. The spring terms use the current
-    position; the damping terms the velocity at the end of the step of length h (h = 0: the
-    current velocity, i.e. plain semi-implicit Euler). The force is then limited ("the ground
-    never pulls"; Coulomb if mu > 0) and, if a limit applies, the leg is solved again with the
-    limited force held fixed. Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
-    """
-    l1, l2 = P[P_L1], P[P_L2]
-    bx, by = P[P_BGX], P[P_BGY]
-    fx = -P[P_KGX] * (x - x_touch) - bx * vx
-    fy = -P[P_KGY] * y - by * vy
-    a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK], P[P_MF],
-                                  P[P_G], tm1, tm2, fhx, fhy, fx, fy, bx, by, h)
-    if h > 0.0:
-        # end-of-step foot velocity change: J_F ddq h
-        dvx = h * (a0 + (l1 * c1 + l2 * c12) * a2 + l2 * c12 * a3)
-        dvy = h * (a1 + (l1 * s1 + l2 * s12) * a2 + l2 * s12 * a3)
-        fx -= bx * dvx
-        fy -= by * dvy
-    lx, ly = limit_force(fx, fy, P[P_MU])
-    if lx != fx or ly != fy:
-        a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK],
-                                      P[P_MF], P[P_G], tm1, tm2, fhx, fhy, lx, ly, 0.0, 0.0, 0.0)
-    return a0, a1, a2, a3, lx, ly
+
+@njit(cache=True)
+def scratch():  # type: ignore[no-untyped-def]
+    """Work arrays of one state: (fh (6, 2), work (6, W_SIZE), ff (6, 2), qdd (6, 4))."""
+    return (np.empty((N_LEGS, 2)), np.empty((N_LEGS, W_SIZE)), np.empty((N_LEGS, 2)),
+            np.empty((N_LEGS, 4)))
 
 
 @njit(cache=True, error_model="numpy")
-def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
-    """Forces and accelerations at state ``s`` under joint torques ``torque`` (6, 2) (N m).
+def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
+    """The state part of the forces and accelerations at state ``s`` (no torque needed).
 
-    Updates the contact state stored in ``s`` (idempotent for one state) and writes
-    F_RH into fh (6, 2), F_RF into ff (6, 2) and ddq into qdd (6, 4).
+    Updates the contact state stored in ``s`` (idempotent for one state), writes F_RH into
+    fh (6, 2) and, per leg, into ``work`` (6, W_SIZE): the factored system matrix, bias and
+    foot Jacobian (dynamics.leg_system_cs), the ground force at the current velocity
+    (0 in flight), cos/sin of theta1 and theta1 + theta2, and the joint rates.
+    :func:`solve` finishes the step for a given torque; the observation of a tick and the
+    first physics step after it share one call.
     """
     q = s[Q0:Q0 + 24].reshape(N_LEGS, 4)
     dq = s[V0:V0 + 24].reshape(N_LEGS, 4)
@@ -92,14 +77,73 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
         if c != 0.0:
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
             vx, vy = dq[i, 0] + dvx, dq[i, 1] + dvy
-            a0, a1, a2, a3, fx, fy = leg_contact_accel(c1, s1, c12, s12, w1, w2, P,
-                                                       torque[i, 0], torque[i, 1], fh[i, 0],
-                                                       fh[i, 1], x, y, vx, vy, xt, h)
+            bx, by = P[P_BGX], P[P_BGY]
+            fx = -P[P_KGX] * (x - xt) - bx * vx
+            fy = -P[P_KGY] * y - by * vy
+            factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH],
+                                              P[P_MK], P[P_MF], P[P_G], bx, by, h)
         else:
             fx, fy = 0.0, 0.0
-            a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH], P[P_MK],
-                                          P[P_MF], P[P_G], torque[i, 0], torque[i, 1],
-                                          fh[i, 0], fh[i, 1], 0.0, 0.0, 0.0, 0.0, 0.0)
+            factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH],
+                                              P[P_MK], P[P_MF], P[P_G], 0.0, 0.0, 0.0)
+        for k in range(10):
+            work[i, W_FACTOR + k] = factor[k]
+        for k in range(4):
+            work[i, W_BIAS + k] = bias[k]
+            work[i, W_JAC + k] = jac[k]
+        work[i, W_FG], work[i, W_FG + 1] = fx, fy
+        work[i, W_CS], work[i, W_CS + 1], work[i, W_CS + 2], work[i, W_CS + 3] = c1, s1, c12, s12
+        work[i, W_W], work[i, W_W + 1] = w1, w2
+
+
+@njit(cache=True, error_model="numpy")
+def leg_contact_solve(factor, bias, jac, c1, s1, c12, s12, w1, w2, P,  # type: ignore[no-untyped-def]
+                      tm1, tm2, fhx, fhy, fx, fy, h):
+    """Accelerations of a leg whose foot is in contact, and the ground force it feels.
+
+    factor, bias, jac: the leg's state part (dynamics.leg_system_cs, with the ground damping
+    over h); c1, s1, c12, s12: cos/sin of theta1 and theta1 + theta2; (fx, fy): the ground
+    force at the current velocity (N). The damping terms act at the velocity at the end of
+    the step of length h (h = 0: the current velocity, i.e. plain semi-implicit Euler). The
+    force is then limited ("the ground never pulls"; Coulomb if mu > 0) and, if a limit
+    applies, the leg is solved again with the limited force held fixed.
+    Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
+    """
+    a0, a1, a2, a3 = leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, fx, fy)
+    if h > 0.0:
+        # end-of-step foot velocity change: J_F ddq h
+        af, bf, ja2, jb2 = jac
+        dvx = h * (a0 + af * a2 + ja2 * a3)
+        dvy = h * (a1 + bf * a2 + jb2 * a3)
+        fx -= P[P_BGX] * dvx
+        fy -= P[P_BGY] * dvy
+    lx, ly = limit_force(fx, fy, P[P_MU])
+    if lx != fx or ly != fy:
+        a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, P[P_L1], P[P_L2], P[P_MH],
+                                      P[P_MK], P[P_MF], P[P_G], tm1, tm2, fhx, fhy, lx, ly,
+                                      0.0, 0.0, 0.0)
+    return a0, a1, a2, a3, lx, ly
+
+
+@njit(cache=True, error_model="numpy")
+def solve(s, torque, P, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
+    """The torque part: from :func:`prepare`'s fh and work at state ``s`` and joint torques
+    ``torque`` (6, 2) (N m), write F_RF into ff (6, 2) and ddq into qdd (6, 4)."""
+    h = P[P_DT] if P[P_IMPL] != 0.0 else 0.0
+    for i in range(N_LEGS):
+        w = work[i]
+        factor = (w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8], w[9])
+        bias = (w[W_BIAS], w[W_BIAS + 1], w[W_BIAS + 2], w[W_BIAS + 3])
+        jac = (w[W_JAC], w[W_JAC + 1], w[W_JAC + 2], w[W_JAC + 3])
+        if s[C0 + i] != 0.0:
+            a0, a1, a2, a3, fx, fy = leg_contact_solve(
+                factor, bias, jac, w[W_CS], w[W_CS + 1], w[W_CS + 2], w[W_CS + 3], w[W_W],
+                w[W_W + 1], P, torque[i, 0], torque[i, 1], fh[i, 0], fh[i, 1], w[W_FG],
+                w[W_FG + 1], h)
+        else:
+            fx, fy = 0.0, 0.0
+            a0, a1, a2, a3 = leg_solve(factor, bias, jac, torque[i, 0], torque[i, 1],
+                                       fh[i, 0], fh[i, 1], 0.0, 0.0)
         ff[i, 0] = fx
         ff[i, 1] = fy
         qdd[i, 0] = a0
@@ -109,23 +153,49 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def advance(s, torque, P, n_steps):  # type: ignore[no-untyped-def]
-    """Integrate ``n_steps`` physics steps of P[P_DT] under the held ``torque`` (6, 2), in place.
+def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
+    """Forces and accelerations at state ``s`` under joint torques ``torque`` (6, 2) (N m).
+
+    Updates the contact state stored in ``s`` (idempotent for one state) and writes
+    F_RH into fh (6, 2), F_RF into ff (6, 2) and ddq into qdd (6, 4): :func:`prepare`
+    then :func:`solve`.
+    """
+    work = np.empty((N_LEGS, W_SIZE))
+    prepare(s, P, fh, work)
+    solve(s, torque, P, fh, work, ff, qdd)
+
+
+@njit(cache=True)
+def advance_prepared(s, torque, P, n_steps, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
+    """Integrate ``n_steps`` physics steps of P[P_DT] under the held ``torque`` (6, 2), in place,
+    the first from fh/work that :func:`prepare` (or :func:`observe_prepared`) filled at the
+    current state ``s`` with the same ``P``; the arrays are the step's scratch.
 
     Returns False (and stops) as soon as the state diverges.
     """
-    fh = np.empty((N_LEGS, 2))
-    ff = np.empty((N_LEGS, 2))
-    qdd = np.empty((N_LEGS, 4))
     dt = P[P_DT]
-    for _ in range(n_steps):
-        accelerations(s, torque, P, fh, ff, qdd)
+    for k in range(n_steps):
+        if k > 0:
+            prepare(s, P, fh, work)
+        solve(s, torque, P, fh, work, ff, qdd)
         for i in range(N_LEGS):
             for j in range(4):
                 v = s[V0 + 4 * i + j] + dt * qdd[i, j]
                 s[V0 + 4 * i + j] = v
                 s[Q0 + 4 * i + j] += dt * v
     return state_ok(s)
+
+
+@njit(cache=True)
+def advance(s, torque, P, n_steps):  # type: ignore[no-untyped-def]
+    """Integrate ``n_steps`` physics steps of P[P_DT] under the held ``torque`` (6, 2), in place.
+
+    Returns False (and stops) as soon as the state diverges.
+    """
+    fh, work, ff, qdd = scratch()
+    if n_steps > 0:
+        prepare(s, P, fh, work)
+    return advance_prepared(s, torque, P, n_steps, fh, work, ff, qdd)
 
 
 @njit(cache=True)
@@ -139,32 +209,54 @@ def state_ok(s):  # type: ignore[no-untyped-def]
     return True
 
 
+#: The fields :func:`leg_sample` returns, two values (x/joint 1, y/joint 2) each.
+SAMPLE_ORDER = ("theta", "theta_vel", "torque", "foot_pos", "foot_vel", "foot_force",
+                "hip_pos", "hip_vel", "hip_force")
+if SAMPLE_ORDER != OBS_FIELDS:  # pragma: no cover - a layout change must update leg_sample
+    raise ImportError("engine.leg_sample no longer matches layout.OBS_FIELDS")
+
+
+@njit(cache=True)
+def leg_sample(xh, yh, th1, th2, vxh, vyh, w1, w2, c1, s1, c12, s12,  # type: ignore[no-untyped-def]
+               tq1, tq2, ffx, ffy, ddxh, ddyh, fhx, fhy, l1, l2, mh, grav):
+    """One leg's observation, the 18 values of obs[:, i, :] in OBS_FIELDS order.
+
+    Hip (xh, yh) (m) and joint angles (rad), their rates, cos/sin of theta1 and
+    theta1 + theta2, the torque acting (N m), the ground force F_RF, the hip accelerations
+    (m/s^2) and the body force F_RH (N) at that state. The order is :data:`SAMPLE_ORDER`.
+    """
+    dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
+    dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
+    # f_i = m_H (ddp_H - [0, -g]) - F_RH,i: the force leg i exerts on its body segment.
+    return (th1, th2, w1, w2, tq1, tq2, xh + dx, yh + dy, vxh + dvx, vyh + dvy, ffx, ffy,
+            xh, yh, vxh, vyh, mh * ddxh - fhx, mh * (ddyh + grav) - fhy)
+
+
+@njit(cache=True)
+def observe_prepared(s, torque_held, P, obs, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
+    """Fill ``obs`` (9, 6, 2) with the sample of the current tick (see module docstring) and
+    leave the state part of state ``s`` in fh/work for :func:`advance_prepared`."""
+    prepare(s, P, fh, work)
+    solve(s, torque_held, P, fh, work, ff, qdd)
+    l1, l2, mh, grav = P[P_L1], P[P_L2], P[P_MH], P[P_G]
+    for i in range(N_LEGS):
+        w = work[i]
+        sample = leg_sample(s[Q0 + 4 * i], s[Q0 + 4 * i + 1], s[Q0 + 4 * i + 2],
+                            s[Q0 + 4 * i + 3], s[V0 + 4 * i], s[V0 + 4 * i + 1],
+                            s[V0 + 4 * i + 2], s[V0 + 4 * i + 3], w[W_CS], w[W_CS + 1],
+                            w[W_CS + 2], w[W_CS + 3], torque_held[i, 0], torque_held[i, 1],
+                            ff[i, 0], ff[i, 1], qdd[i, 0], qdd[i, 1], fh[i, 0], fh[i, 1], l1,
+                            l2, mh, grav)
+        for f in range(9):
+            obs[f, i, 0] = sample[2 * f]
+            obs[f, i, 1] = sample[2 * f + 1]
+
+
 @njit(cache=True)
 def observe(s, torque_held, P, obs):  # type: ignore[no-untyped-def]
     """Fill ``obs`` (9, 6, 2) with the sample of the current tick (see module docstring)."""
-    fh = np.empty((N_LEGS, 2))
-    ff = np.empty((N_LEGS, 2))
-    qdd = np.empty((N_LEGS, 4))
-    accelerations(s, torque_held, P, fh, ff, qdd)
-    l1, l2, mh, grav = P[P_L1], P[P_L2], P[P_MH], P[P_G]
-    for i in range(N_LEGS):
-        xh, yh, th1, th2 = s[Q0 + 4 * i], s[Q0 + 4 * i + 1], s[Q0 + 4 * i + 2], s[Q0 + 4 * i + 3]
-        vxh, vyh = s[V0 + 4 * i], s[V0 + 4 * i + 1]
-        w1, w2 = s[V0 + 4 * i + 2], s[V0 + 4 * i + 3]
-        c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th1 + th2), np.sin(th1 + th2)
-        dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
-        dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
-        obs[O_TH, i, 0], obs[O_TH, i, 1] = th1, th2
-        obs[O_THV, i, 0], obs[O_THV, i, 1] = w1, w2
-        obs[O_TQ, i, 0], obs[O_TQ, i, 1] = torque_held[i, 0], torque_held[i, 1]
-        obs[O_FP, i, 0], obs[O_FP, i, 1] = xh + dx, yh + dy
-        obs[O_FV, i, 0], obs[O_FV, i, 1] = vxh + dvx, vyh + dvy
-        obs[O_FF, i, 0], obs[O_FF, i, 1] = ff[i, 0], ff[i, 1]
-        obs[O_HP, i, 0], obs[O_HP, i, 1] = xh, yh
-        obs[O_HV, i, 0], obs[O_HV, i, 1] = vxh, vyh
-        # f_i = m_H (ddp_H - [0, -g]) - F_RH,i: the force leg i exerts on its body segment.
-        obs[O_HF, i, 0] = mh * qdd[i, 0] - fh[i, 0]
-        obs[O_HF, i, 1] = mh * (qdd[i, 1] + grav) - fh[i, 1]
+    fh, work, ff, qdd = scratch()
+    observe_prepared(s, torque_held, P, obs, fh, work, ff, qdd)
 
 
 def initial_state(p: HexapodParams) -> np.ndarray:
@@ -185,7 +277,9 @@ class Physics:
     """The stepping object the sim node and scripts use: owns the state and the model vector.
 
     ``torque`` is the held actuator torque T_m (6, 2) (N m); :meth:`advance_tick` integrates
-    one control period with it; :meth:`observe` returns the tick's sample (9, 6, 2).
+    one control period with it; :meth:`observe` returns the tick's sample (9, 6, 2). The
+    first physics step of :meth:`advance_tick` reuses the state part that :meth:`observe`
+    computed at the same state (same numbers, bit for bit, as recomputing it).
     """
 
     def __init__(self, p: HexapodParams) -> None:
@@ -195,6 +289,8 @@ class Physics:
         self.torque = np.zeros((N_LEGS, 2))
         self.substeps = p.substeps
         self.tick = 0
+        self._scratch = scratch()
+        self._prepared = False  # the scratch holds the state part of self.state, self.P
 
     @property
     def time(self) -> float:
@@ -205,20 +301,29 @@ class Physics:
         """Take new physical parameters (ground, actuator, ...) from the next step on."""
         self.params = p
         self.P = model_vector(p)
+        self._prepared = False
 
     def observe(self) -> np.ndarray:
         """Sample of the current tick: state and the torque acting now."""
         obs = np.empty(OBS_SHAPE)
-        observe(self.state, self.torque, self.P, obs)
+        observe_prepared(self.state, self.torque, self.P, obs, *self._scratch)
+        self._prepared = True
         return obs
 
     def advance_tick(self, torque: np.ndarray) -> None:
         """Hold ``torque`` (already saturated) for one control period and integrate it."""
         self.torque = np.ascontiguousarray(torque, dtype=float).reshape(N_LEGS, 2)
-        if not advance(self.state, self.torque, self.P, self.substeps):
+        fh, work, ff, qdd = self._scratch
+        if not self._prepared:
+            prepare(self.state, self.P, fh, work)
+        self._prepared = False
+        if not advance_prepared(self.state, self.torque, self.P, self.substeps, fh, work, ff,
+                                qdd):
             raise DivergenceError(f"state diverged between t = {self.time:.4f} s and the next "
                                   f"tick (non-finite or beyond {MAX_COORD:g})")
         self.tick += 1
 
 
-__all__ = ["Physics", "accelerations", "advance", "initial_state", "observe", "state_ok"]
+__all__ = ["Physics", "W_SIZE", "accelerations", "advance", "advance_prepared", "initial_state",
+           "leg_contact_solve", "observe", "observe_prepared", "prepare", "scratch", "solve",
+           "state_ok"]

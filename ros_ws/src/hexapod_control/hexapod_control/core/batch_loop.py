@@ -1,0 +1,115 @@
+"""The closed loop of many cases at once: blocks of cases in structure-of-arrays layout.
+
+Each block holds cases of one physics step count per tick (``substeps``) as columns of
+hexapod_sim.core.batch_physics arrays and runs closed_loop.run_ticks's tick for all of them:
+observe (state part shared with the first physics step), control law, saturation,
+``substeps`` physics steps. A case that diverges leaves its block at once (its column is
+swapped behind the active ones), so it costs the others nothing. Blocks run in parallel
+(numba ``prange``, one block per thread at a time).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from hexapod_sim.core.actuator import clip_torque
+from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_sample,
+                                            block_scratch, block_solve, swap_columns)
+from hexapod_sim.core.engine import state_ok
+from hexapod_sim.core.layout import P_L1, P_L2, P_TMAX, Q0, V0
+from hexapod_sim.core.params import N_LEGS
+
+from .controllers import leg_demand
+
+#: Most cases per block: the block arrays' width (their work arrays stay in a core's L2).
+MAX_BLOCK = LANES
+
+
+@njit(cache=True)
+def _drop(X, PT, TQ, G, codes, cols, b, last):  # type: ignore[no-untyped-def]
+    """Swap column b behind the active ones (into column ``last``)."""
+    swap_columns(X, b, last)
+    swap_columns(PT, b, last)
+    swap_columns(TQ, b, last)
+    swap_columns(G, b, last)
+    codes[b], codes[last] = codes[last], codes[b]
+    cols[b], cols[last] = cols[last], cols[b]
+
+
+@njit(cache=True, error_model="numpy")
+def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  # type: ignore[no-untyped-def]
+              obs_out, cols, ok):
+    """Run columns 0..n-1 of a block for len(theta_d) ticks from torque zero.
+
+    X (STATE_SIZE, B) states, PT (MODEL_SIZE, B) model vectors, codes (B,) controller codes,
+    G (5, B) gains, cols (B,) the case index of each column; B = batch_physics.LANES. Records the sample of tick k
+    into obs_out[case, k - rec_offset] when that row exists (the tick after the last too),
+    and sets ok[case].
+    """
+    FH, WK, FF, QDD, TR, FLAG = block_scratch()
+    TQ = np.zeros((2 * N_LEGS, LANES))
+    n_ticks = theta_d.shape[0]
+    n_rec = obs_out.shape[1]
+    for k in range(n_ticks + 1):
+        block_prepare(X, PT, n, FH, WK, TR)
+        block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG)
+        r = k - rec_offset
+        if 0 <= r < n_rec:
+            for b in range(n):
+                block_sample(X, TQ, PT, b, FH, WK, FF, QDD, obs_out[cols[b], r])
+        if k == n_ticks:
+            break
+        for i in range(N_LEGS):
+            thd1, thd2 = theta_d[k, i, 0], theta_d[k, i, 1]
+            wd1, wd2 = theta_vel_d[k, i, 0], theta_vel_d[k, i, 1]
+            for b in range(n):
+                t1, t2 = leg_demand(codes[b], G[0, b], G[1, b], G[2, b], G[3, b], G[4, b],
+                                    X[Q0 + 4 * i + 2, b], X[Q0 + 4 * i + 3, b],
+                                    X[V0 + 4 * i + 2, b], X[V0 + 4 * i + 3, b],
+                                    FF[2 * i, b], FF[2 * i + 1, b], thd1, thd2, wd1, wd2,
+                                    PT[P_L1, b], PT[P_L2, b])
+                TQ[2 * i, b] = clip_torque(t1, PT[P_TMAX, b])
+                TQ[2 * i + 1, b] = clip_torque(t2, PT[P_TMAX, b])
+        for step in range(substeps):
+            if step > 0:
+                block_prepare(X, PT, n, FH, WK, TR)
+            block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG)
+            block_integrate(X, PT, n, QDD)
+        b = 0
+        while b < n:
+            if state_ok(X[:, b]):
+                b += 1
+            else:
+                ok[cols[b]] = False
+                n -= 1
+                _drop(X, PT, TQ, G, codes, cols, b, n)
+        if n == 0:
+            return
+    for b in range(n):
+        ok[cols[b]] = True
+
+
+@njit(cache=True, parallel=True)
+def run_blocks(Xs, PTs, codes, Gs, counts, theta_d, theta_vel_d, substeps, rec_offset,  # type: ignore[no-untyped-def]
+               obs_out, cols, ok):
+    """:func:`run_block` for every block (leading axis of Xs, PTs, codes, Gs, cols; counts
+    and substeps per block), in parallel."""
+    for j in prange(Xs.shape[0]):
+        run_block(Xs[j], PTs[j], codes[j], Gs[j], counts[j], theta_d, theta_vel_d,
+                  substeps[j], rec_offset, obs_out, cols[j], ok)
+
+
+def block_plan(substeps: np.ndarray, threads: int) -> list[np.ndarray]:
+    """Case indices of each block: cases grouped by substeps, each group cut into blocks of
+    at most :data:`MAX_BLOCK` cases and at least two blocks per thread where it has cases
+    enough (8 or more per block)."""
+    blocks = []
+    for s in np.unique(substeps):
+        idx = np.flatnonzero(substeps == s)
+        per = max(8, -(-idx.size // (2 * threads)))
+        per = min(per, MAX_BLOCK)
+        blocks += [idx[a:a + per] for a in range(0, idx.size, per)]
+    return blocks
+
+
+__all__ = ["MAX_BLOCK", "block_plan", "run_block", "run_blocks"]
