@@ -12,7 +12,9 @@ def test_defaults_are_the_paper_base_experiment():
     assert (p.gait.duty_factor, p.gait.step_length, p.gait.body_height) == (0.5, 1.0, 1.8)
     assert (p.robot.body_mass, p.ground.k_y, p.actuator.t_max) == (87.4, 1e6, 400.0)
     assert p.pd_pf.as_tuple() == (20500.0, 110.0, 22000.0, 150.0, 0.9)
-    assert p.substeps == 10 and p.cycle_time == 1.0
+    # the paper experiments' resolution (E6): 5e-5 s physics, 10 kHz control
+    assert (p.sim.dt, p.sim.control_period) == (5e-5, 1e-4)
+    assert p.substeps == 2 and p.cycle_time == 1.0
 
 
 @pytest.mark.parametrize("name, value, allowed", [
@@ -45,7 +47,7 @@ def test_unreachable_gait_is_rejected():
 
 def test_control_period_must_be_multiple_of_dt():
     with pytest.raises(ParameterError, match="sim.control_period.*integer multiple of sim.dt"):
-        load_params(**{"sim.control_period": 0.00105})
+        load_params(**{"sim.control_period": 0.000125})
 
 
 def test_unknown_parameter_is_rejected():
