@@ -27,7 +27,9 @@
 #   -h, --help               this text
 # Environment: ROS_DOMAIN_ID is honoured; discovery stays on this machine unless
 # ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise. While it runs, switch controllers with
-# scripts/switch_controller.sh pd_p|pd_pf (same ROS_DOMAIN_ID).
+# scripts/switch_controller.sh pd_p|pd_pf (same ROS_DOMAIN_ID). The graph's messages are
+# authenticated with a fresh key per run (a 0600 file in a private directory, removed at
+# the end; HEXAPOD_KEY_FILE names it for a node started by hand to join the run).
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -53,7 +55,7 @@ while [[ $# -gt 0 ]]; do
     --foxglove)
       markers=1 foxglove=8765; shift
       if [[ $# -gt 0 && "$1" =~ ^[0-9]+$ ]]; then foxglove="$1"; shift; fi ;;
-    -h|--help) sed -n '2,30p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,32p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) die "unknown option '$1' (try --help)" ;;
   esac
 done
@@ -79,6 +81,12 @@ mkdir -p "$(dirname "$bag")"
 bag="$(cd "$(dirname "$bag")" && pwd)/$(basename "$bag")"
 logs="${bag}_logs"
 mkdir -p "$logs"
+# The run's key (hexapod_sim/core/msg_auth.py): only the graph's own nodes hold it.
+keydir=""
+if [[ "${HEXAPOD_AUTH:-on}" != off && -z "${HEXAPOD_KEY_FILE:-}" ]]; then
+  keydir="$(python -c 'from hexapod_sim.core.msg_auth import new_key_file; print(new_key_file().parent)')"
+  export HEXAPOD_KEY_FILE="$keydir/key"
+fi
 
 common=(--ros-args --params-file "$params" -p "run.controller:=$controller" -p "sim.mode:=$mode")
 [[ -n "$ground_scale" ]] && common+=(-p "ground.scale:=$ground_scale")
@@ -136,6 +144,8 @@ cleanup() {
     stop "$n" 5
   done
   stop metrics 30
+  [[ -n "$keydir" ]] && rm -rf "$keydir"
+  return 0
 }
 trap 'cleanup' EXIT
 trap 'echo "run_graph: interrupted: stopping the graph" >&2; cleanup; exit 130' INT TERM
@@ -144,6 +154,7 @@ desc="$mode mode, $controller in charge"
 if (( ! no_switch )) && [[ -n "$switch_at" ]]; then desc+=", $switch_to from t = $switch_at s"; fi
 if awk "BEGIN{exit !($duration > 0)}"; then desc+=", $duration s"; else desc+=", until Ctrl-C"; fi
 echo "run_graph: ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}: $desc (node logs in $logs)"
+[[ -n "${HEXAPOD_KEY_FILE:-}" ]] && echo "run_graph: run key $HEXAPOD_KEY_FILE"
 start metrics hexapod_metrics.metrics_node main 10 -p "bag_path:=$bag" "${sim_time_arg[@]}"
 start trajectory_generator hexapod_control.trajectory_node main 0 "${sim_time_arg[@]}"
 start pd_p_controller hexapod_control.controller_node main_pd_p 0 "${sim_time_arg[@]}"
@@ -170,6 +181,11 @@ if (( sim_code != 0 )); then
 fi
 cleanup
 trap - EXIT
+# Dropped messages and publishers outside the graph, as each node reported them.
+for f in "$logs"/*.log; do
+  grep -h -E "publishers on .* not nodes of this graph|inputs: dropped" "$f" \
+    | sed "s/^/  $(basename "$f" .log): /" || true
+done
 
 if [[ -f "$bag/indices.json" ]]; then
   python - "$bag/indices.json" <<'PY'

@@ -9,4 +9,9 @@ if [[ $# -lt 1 || "$1" == -h || "$1" == --help ]]; then
   sed -n '2,5p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
   [[ $# -lt 1 ]] && exit 2 || exit 0
 fi
-exec "$here/hexapod" switch "$@"
+"$here/setup.sh" --quiet
+# shellcheck source=scripts/env.sh
+source "$here/env.sh"
+# The switch subcommand alone (not the whole `hexapod` CLI): it asks the sim over its local
+# socket first, so a switch takes a fraction of a second and no ROS context.
+exec python -m hexapod_metrics.cmd_graph switch "$@"

@@ -15,9 +15,10 @@ T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exact
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
 ``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the
 architecture's name. References and foot forces queue in their subscriptions without
-waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken when a state
-names this controller, so a controller that is not in charge costs one wake-up per tick
-and is ready to take over at any tick boundary.
+waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken at every state, so a
+controller that is not in charge costs one wake-up per tick and is ready to take over at
+any tick boundary. Every input goes through the guard (``hexapod_sim.input_guard``) and
+every command is signed with the run's key.
 """
 from __future__ import annotations
 
@@ -33,10 +34,13 @@ from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.msg_auth import AuthError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
@@ -52,9 +56,15 @@ class ControllerNode(LifecycleNode):
         self.code = controller_code(architecture)
         super().__init__(f"{architecture}_controller")
         self.log = FastLogger(self.get_logger().name)
+        self.guard = InputGuard(self, self.log)
+        # The states are this node's time source: strictly increasing, at most
+        # msg_checks.AHEAD_S ahead of the last; references and forces within AHEAD_S of it.
+        self.window = M.StampWindow(increasing=True)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.autostart = declare_node_param(self, "autostart", True,
                                             "configure and activate at start")
+        self.guard.publish_status(self.get_name(), lambda: self.window.newest or 0)
+        self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
         self.js_codec = C.CODECS[T.JOINT_STATES]
         self.ff_codec = C.CODECS[T.FOOT_FORCES]
@@ -65,7 +75,9 @@ class ControllerNode(LifecycleNode):
         self.active = False
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
-        self.pending: int | None = None  # stamp of a state of ours waiting for its inputs
+        # States of ours waiting for their reference or foot forces (answered, in order, as
+        # soon as those are there, also after newer states: late beats never in realtime).
+        self.pending: dict[int, C.JointStateView] = {}
         self.obs = np.zeros((9, N_LEGS, 2))
         self.theta_d = np.zeros((N_LEGS, 2))
         self.theta_vel_d = np.zeros((N_LEGS, 2))
@@ -73,6 +85,7 @@ class ControllerNode(LifecycleNode):
         self.answered = 0
         self.waited = 0  # states whose reference or foot forces came after them
         self._load_gains(self.binding.params)
+        self.period_ns = int(round(self.binding.params.sim.control_period * 1e9))
         self._law()  # warm up the compiled law before the first tick
         self.last_state = -1  # stamp of the newest state of ours (ns)
         self.announcer = ParamAnnouncer(self, self.binding.params.sim.control_period,
@@ -125,13 +138,13 @@ class ControllerNode(LifecycleNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Stop answering (the subscriptions stay, buffers keep filling)."""
         self.active = False
-        self.pending = None
+        self.pending.clear()
         self.log.info("inactive")
         return super().on_deactivate(state)
 
     def _teardown(self) -> None:
         self.active = False
-        self.pending = None
+        self.pending.clear()
         for sub in self.subs.values():
             self.loop.unsubscribe(sub)
         self.subs.clear()
@@ -153,68 +166,80 @@ class ControllerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ per tick
     def _on_reference(self, data: bytes) -> None:
-        ref = self.ref_codec.decode(data)
+        ref = self.guard.joint_state(T.REFERENCE, data, self.period_ns, self.window)
+        if ref is None:
+            return
         self.refs[ref.stamp_ns] = ref
         if len(self.refs) > MAX_BUFFERED:
             del self.refs[min(self.refs)]
-        if self.pending == ref.stamp_ns:
+        if ref.stamp_ns in self.pending:
             self._answer()
 
     def _on_forces(self, data: bytes) -> None:
-        ff = self.ff_codec.decode(data)
+        ff = self.guard.joint_state(T.FOOT_FORCES, data, self.period_ns, self.window)
+        if ff is None:
+            return
         self.forces[ff.stamp_ns] = ff
         if len(self.forces) > MAX_BUFFERED:
             del self.forces[min(self.forces)]
-        if self.pending == ff.stamp_ns:
+        if ff.stamp_ns in self.pending:
             self._answer()
 
     def _on_state(self, data: bytes) -> None:
         """A state: ours to answer if it names this controller (and we are active).
 
         Reference and foot forces do not wake the loop (hot_loop.py): they queue in their
-        subscriptions (conversions.CONTROL_DEPTH deep) and are taken here, when a state
-        needs them; only if one is still missing do they wake the loop until it is there.
+        subscriptions (``conversions.CONTROL_DEPTH`` deep) and are taken here, at every state, also
+        while another controller is in charge: so the buffers hold the current tick's inputs
+        whenever a state names this controller, however far the process lagged (a switch
+        then costs no more than any tick). Only if an input is still missing does it wake
+        the loop until it is there.
         """
-        js = self.js_codec.decode(data)
-        if js.frame_id != self.arch or not self.active:
+        js = self.guard.joint_state(T.JOINT_STATES, data, self.period_ns, self.window,
+                                    advance=True)
+        if js is None:
             return
         stamp = js.stamp_ns
+        if T.REFERENCE in self.subs:
+            self.loop.take(self.subs[T.REFERENCE])
+            self.loop.take(self.subs[T.FOOT_FORCES])
+            keep = min(self.pending, default=stamp)
+            for buf in (self.refs, self.forces):
+                for s in [s for s in buf if s < keep]:
+                    del buf[s]
+        if js.frame_id != self.arch or not self.active:
+            return
         self.last_state = stamp
-        C.fill_obs(self.obs, T.JOINT_STATES, js.position, js.velocity, js.effort)
-        self.pending = None
-        self.loop.take(self.subs[T.REFERENCE])
-        self.loop.take(self.subs[T.FOOT_FORCES])
-        for buf in (self.refs, self.forces):
-            for s in [s for s in buf if s < stamp]:
-                del buf[s]
-        self.pending = stamp
+        self.pending[stamp] = js
+        if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give the oldest up
+            del self.pending[min(self.pending)]
         self._answer()
-        if self.pending is not None:  # an input is late: let it wake us
+        if self.pending:  # an input is late: let it wake us
             self.waited += 1
             self.loop.set_wake(self.subs[T.REFERENCE], True)
             self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
 
     def _answer(self) -> None:
-        """Compute and publish the command of the pending state once its inputs are there."""
-        stamp = self.pending
-        if stamp is None:
-            return
-        ref = self.refs.get(stamp)
-        ff = self.forces.get(stamp)
-        if ref is None or ff is None:
-            return
-        self.pending = None
-        self.loop.set_wake(self.subs[T.REFERENCE], False)
-        self.loop.set_wake(self.subs[T.FOOT_FORCES], False)
-        C.fill_obs(self.obs, T.FOOT_FORCES, ff.position, ff.velocity, ff.effort)
-        r = T.split_reference(ref.position, ref.velocity)
-        self.theta_d[:] = r["theta"]
-        self.theta_vel_d[:] = r["theta_vel"]
-        self._law()
-        c = T.command_columns(self.demand)
-        data = self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity, c.effort)
-        self.pub.publish(data)
-        self.answered += 1
+        """Compute and publish the command of each pending state whose inputs are there."""
+        for stamp in sorted(self.pending):
+            ref = self.refs.get(stamp)
+            ff = self.forces.get(stamp)
+            if ref is None or ff is None:
+                continue
+            js = self.pending.pop(stamp)
+            C.fill_obs(self.obs, T.JOINT_STATES, js.position, js.velocity, js.effort)
+            C.fill_obs(self.obs, T.FOOT_FORCES, ff.position, ff.velocity, ff.effort)
+            r = T.split_reference(ref.position, ref.velocity)
+            self.theta_d[:] = r["theta"]
+            self.theta_vel_d[:] = r["theta_vel"]
+            self._law()
+            c = T.command_columns(self.demand)
+            data = self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity, c.effort)
+            self.pub.publish(self.cmd_signer.sign(data))
+            self.answered += 1
+        if not self.pending:
+            self.loop.set_wake(self.subs[T.REFERENCE], False)
+            self.loop.set_wake(self.subs[T.FOOT_FORCES], False)
 
     def _law(self) -> None:
         control_law(self.code, self.gains, self.obs, self.theta_d, self.theta_vel_d, self.l1,
@@ -235,13 +260,13 @@ def _main(architecture: str, args: list[str] | None) -> int:
         node.loop.spin()
     except HexapodError as err:
         rclpy.logging.get_logger(f"{architecture}_controller").error(str(err))
-        code = 2 if isinstance(err, ParameterError) else 1
+        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
             node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                          f"their reference or foot forces)")
+                          f"their reference or foot forces); inputs: {node.guard.summary()}")
             if node.pub is not None:
                 node.pub.wait_for_all_acked(Duration(seconds=1))
             node.loop.destroy()

@@ -20,15 +20,17 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.msg_auth import AuthError
 from hexapod_sim.core.gait import Reference, reference
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
@@ -40,6 +42,10 @@ class TrajectoryNode(Node):
     def __init__(self) -> None:
         super().__init__("trajectory_generator")
         self.log = FastLogger(self.get_logger().name)
+        self.guard = InputGuard(self, self.log)
+        # The authenticated states are the time source (/clock carries no tag): they may go
+        # back (a new run), not leap ahead.
+        self.window = M.StampWindow()
         self.binding = ParamBinding(self, declare_params(self))
         self.lookahead = declare_node_param(self, "lookahead", 1,
                                             "ticks published ahead of the clock")
@@ -51,12 +57,14 @@ class TrajectoryNode(Node):
         self.codec = C.CODECS[T.REFERENCE]
         self.blocks: dict[int, Reference] = {}
         self.next_tick = 0  # first tick not yet published
+        self.guard.publish_status(self.get_name(), lambda: self.window.newest or 0)
         self.loop = HotLoop(self)
         self.pub = self.create_publisher(JointState, T.REFERENCE,
                                          C.TOPIC_QOS[T.REFERENCE].publisher())
+        self.signer = self.guard.signer(T.REFERENCE)
         self._reference_of(0)  # warm up (and validate) before the first clock arrives
-        self.loop.subscribe(Clock, T.CLOCK, self._on_clock,
-                            C.TOPIC_QOS[T.CLOCK].subscriber(C.CONTROL_DEPTH))
+        self.loop.subscribe(JointState, T.JOINT_STATES, self._on_clock,
+                            C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
         self.announcer = ParamAnnouncer(self, self.period, lambda: self.next_tick)
 
     def _block(self, b: int) -> Reference:
@@ -75,14 +83,18 @@ class TrajectoryNode(Node):
                                    ref.foot[i], ref.foot_vel[i])
 
     def _on_clock(self, data: bytes) -> None:
-        k = C.tick_of(C.decode_stamp(data), self.period_ns)
+        got = self.guard.joint_state(T.JOINT_STATES, data, self.period_ns, self.window,
+                                     advance=True)
+        if got is None:
+            return
+        k = C.tick_of(got.stamp_ns, self.period_ns)
         if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
             self.log.info(f"clock went back to tick {k}: restarting the references")
             self.next_tick = k
         for j in range(max(k, self.next_tick), k + self.lookahead + 1):
             c = self._reference_of(j)
-            self.pub.publish(self.codec.encode(T.stamp_ns(j * self.period), "", c.position,
-                                               c.velocity, c.effort))
+            self.pub.publish(self.signer.sign(self.codec.encode(
+                T.stamp_ns(j * self.period), "", c.position, c.velocity, c.effort)))
         self.next_tick = max(self.next_tick, k + self.lookahead + 1)
         last = self.next_tick - 1
         if last % BLOCK_TICKS >= BLOCK_TICKS // 2:  # past half a block: prepare the next
@@ -101,11 +113,12 @@ def main(args: list[str] | None = None) -> int:
         node.loop.spin()
     except HexapodError as err:
         rclpy.logging.get_logger("trajectory_generator").error(str(err))
-        code = 2 if isinstance(err, ParameterError) else 1
+        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
+            node.log.info(f"stopping; inputs: {node.guard.summary()}")
             node.pub.wait_for_all_acked(Duration(seconds=1))
             node.loop.destroy()
             node.destroy_node()

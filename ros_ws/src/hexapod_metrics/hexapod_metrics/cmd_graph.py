@@ -16,14 +16,17 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+import weakref
 from pathlib import Path
 from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
+from hexapod_sim.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file
 from hexapod_sim.core.params import CONTROLLERS
 
 #: node name -> (module, entry point)
@@ -59,7 +62,9 @@ class GraphProcesses:
     ``env`` adds to the current environment (set ``ROS_DOMAIN_ID`` there); every node gets
     ``--params-file params`` if given and its log in ``log_dir/<name>.log``;
     ``use_sim_time`` passes ``use_sim_time:=true`` to the nodes of :data:`SIM_TIME_NODES`;
-    ``overrides`` (``"name:=value"``) go to every node.
+    ``overrides`` (``"name:=value"``) go to every node. Unless ``env`` names a key file
+    (``HEXAPOD_KEY_FILE``) or turns authentication off, the graph gets a fresh run key
+    (``hexapod_sim.core.msg_auth``), removed with this object.
     """
 
     def __init__(self, log_dir: str | os.PathLike[str], params: str | None = None,
@@ -73,6 +78,10 @@ class GraphProcesses:
         self.env = {**os.environ, **(env or {})}
         self.env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         self.env["PYTHONUNBUFFERED"] = "1"
+        if self.env.get(AUTH_ENV, "on").lower() != "off" and not self.env.get(KEY_ENV):
+            key = new_key_file()
+            self.env[KEY_ENV] = str(key)
+            weakref.finalize(self, shutil.rmtree, key.parent, True)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
 
@@ -225,7 +234,23 @@ def ensure_active(node: Any, controller: str, timeout: float) -> str:
 
 
 def switch(controller: str, timeout: float = 10.0) -> str:
-    """Hand control to ``controller`` (see module docstring); the line to print."""
+    """Hand control to ``controller`` (see module docstring); the line to print.
+
+    First through the sim's local switch channel (``hexapod_sim.core.switch_channel``: no
+    ROS context, no discovery, milliseconds); through ROS services if no sim listens there
+    or the controller must first be configured and activated."""
+    from hexapod_sim.core.switch_channel import ChannelError, request
+
+    try:
+        answer = request(f"switch {controller}", _domain(), timeout)
+    except ChannelError as err:
+        raise GraphError(str(err)) from err
+    if answer is not None:
+        status, _, text = answer.partition(" ")
+        if status == "ok":
+            return text
+        if not text.endswith("not active"):
+            raise GraphError(text)
     import rclpy
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import GetParameters, SetParameters
@@ -265,7 +290,9 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
     node = _ros_node("hexapod_status")
     got: list[DiagnosticArray] = []
     try:
-        node.create_subscription(DiagnosticArray, STATUS, got.append, 10)
+        # Every node of the graph publishes its status there: keep the sim's.
+        node.create_subscription(DiagnosticArray, STATUS, lambda m: got.extend(
+            [m] if any(s.name == "hexapod_sim" for s in m.status) else []), 10)
         end = time.monotonic() + timeout
         while not got and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.1)
@@ -322,5 +349,26 @@ def add_parser(subparsers: Any) -> None:
     st.set_defaults(func=_cmd_status)
 
 
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m hexapod_metrics.cmd_graph switch|status ...``: the same subcommands as
+    ``hexapod``, without importing the rest of the CLI (the engine, numba, plots: seconds),
+    for scripts/switch_controller.sh. Errors are one line and exit code 2, as in ``hexapod``."""
+    parser = argparse.ArgumentParser(prog="hexapod")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (HexapodError, OSError) as err:
+        print(f"hexapod {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"hexapod {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
 __all__ = ["GraphError", "GraphProcesses", "NODES", "SIM_TIME_NODES", "add_parser",
-           "ensure_active", "status", "switch"]
+           "ensure_active", "main", "status", "switch"]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

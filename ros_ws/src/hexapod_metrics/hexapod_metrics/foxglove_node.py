@@ -26,6 +26,7 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
 from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import declare_node_param
 
@@ -70,6 +71,7 @@ class FoxgloveBridge(Node):
         self.clock_ns = 0
         self.sent = 0
         self.channels: dict[str, Any] = {}
+        self.guard = InputGuard(self, self.log)  # forwards only the graph's own messages
         self.loop = HotLoop(self, batch_interval=batch)
         for topic, (msgtype, _) in TOPICS.items():
             definition = lookup(msgtype)
@@ -88,8 +90,14 @@ class FoxgloveBridge(Node):
     def _forwarder(self, topic: str):  # type: ignore[no-untyped-def]
         channel = self.channels[topic]
         stamped = topic in STAMPED
+        signed = topic in SIGNED_TOPICS
 
         def cb(data: bytes) -> None:
+            if signed:  # authenticated, trailer stripped (Foxglove gets plain CDR)
+                payload = self.guard.payload(topic, data)
+                if payload is None:
+                    return
+                data = payload
             if stamped:
                 stamp = C.decode_stamp(data)
                 if topic == T.CLOCK and stamp > self.clock_ns:

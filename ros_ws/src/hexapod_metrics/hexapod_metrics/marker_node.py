@@ -26,8 +26,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import OBS_SHAPE
+from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.hot_loop import HotLoop, install_stop_signals
 from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.ros_params import declare_params
 
 from .core.figure import FORCE_SCALE, side, stick_figure
@@ -99,9 +101,11 @@ class MarkerNode(Node):
         self.period_ns = int(round(p.sim.control_period * 1e9))
         self.stride = max(1, int(round(1.0 / (rate * p.sim.control_period))))
         self.pending: dict[int, dict[str, np.ndarray]] = {}
+        self.guard = InputGuard(self, self.get_logger())
         self.loop = HotLoop(self)
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
+        self.signer = self.guard.signer(T.MARKERS)
         for topic in STATE:
             # Deep queues: a marker for every 1/rate s of sim time, even when this node
             # falls behind the sim for a while (a short queue rolled over: gaps of 66-264 ms).
@@ -110,20 +114,21 @@ class MarkerNode(Node):
         self.announcer = ParamAnnouncer(self, p.sim.control_period)
 
     def _make_cb(self, topic: str):  # type: ignore[no-untyped-def]
-        codec = C.CODECS[topic]
-
         def cb(data: bytes) -> None:
-            k = C.tick_of(C.decode_stamp(data), self.period_ns)
+            view = self.guard.joint_state(topic, data, self.period_ns)
+            if view is None:
+                return
+            k = C.tick_of(view.stamp_ns, self.period_ns)
             if k % self.stride:
                 return
-            view = codec.decode(data)
             got = self.pending.setdefault(k, {})
             got[topic] = (view.position.copy(), view.velocity.copy(), view.effort.copy())
             if len(got) == len(STATE):
                 obs = np.empty(OBS_SHAPE)
                 for name, arrays in got.items():
                     C.fill_obs(obs, name, *arrays)
-                self.pub.publish(markers(obs, self.l1, k * self.period_ns))
+                self.pub.publish(self.guard.signed(self.signer,
+                                                   markers(obs, self.l1, k * self.period_ns)))
                 for old in [j for j in self.pending if j <= k]:
                     del self.pending[old]
         return cb
@@ -137,6 +142,9 @@ def main(args: list[str] | None = None) -> int:
         node = MarkerNode()
         install_stop_signals(node.loop)
         node.loop.spin()
+    except HexapodError as err:
+        rclpy.logging.get_logger("markers").error(str(err))
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -1,7 +1,9 @@
 """Node ``metrics``: records every topic of the contract to a bag and scores each gait cycle.
 
-Recording: every topic is subscribed raw (serialized bytes, nothing deserialized on the
-way) with reliable QoS and deep queues, and written as it comes to a rosbag2/MCAP bag
+Recording: every topic is subscribed raw (serialized bytes) with reliable QoS and deep
+queues; each message is authenticated and checked (``hexapod_sim.input_guard``: a dropped
+one is counted and reported, never recorded) and its payload, without the tag, written as
+it comes to a rosbag2/MCAP bag
 (:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
@@ -14,7 +16,11 @@ stamp, a MarkerArray's first marker stamp, and for ``/hexapod/active_controller`
 the switch took effect (the first joint_states naming that controller). Chunks are cut at
 a watermark over the tick topics (:data:`TICK_TOPICS`, less ``reorder_window`` s of sim
 time), so every chunk covers the same ticks of every tick topic, in log-time order, and
-every chunk leaves a complete, indexed MCAP behind it. The node takes its messages in
+every chunk leaves a complete, indexed MCAP behind it. Every message is authenticated and
+checked first (``hexapod_sim.input_guard``: a dropped one is counted and reported, never
+recorded) and its payload recorded without the tag; ``/clock`` (which carries no tag) is
+not subscribed: the clock of each tick is written from the authenticated joint states
+(the same bytes the sim sends). The node takes its messages in
 batches (``batch_interval``, default 5 ms) so that it does not compete with the control
 loop for the CPU; the queues (10000 messages per topic) cover seconds of lag. SIGINT and
 SIGTERM stop the node cleanly: the messages already received are taken and written, the
@@ -54,15 +60,19 @@ from rclpy.serialization import deserialize_message
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.msg_auth import AuthError
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_sim.core.params import CONTROLLERS
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
+from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
 from .core.bag_writer import BagWriter
-from .core.errors import BagError, BagStorageError
+from .core.errors import BagError, BagReadError, BagStorageError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
 from .core.log_times import ControllerLogTimes, marker_array_stamp
 from .core.recording import TICK_TOPICS, TOPICS, ParamRecorder, indices_status
@@ -172,6 +182,11 @@ class MetricsNode(Node):
     def __init__(self) -> None:
         super().__init__("metrics")
         self.log = FastLogger(self.get_logger().name)
+        self.guard = InputGuard(self, self.log)  # nothing unauthenticated or malformed is recorded
+        # The states are the time source; nothing far ahead of them is recorded. The recorder
+        # takes its queues in batches, topic by topic, and may lag by seconds: the window is
+        # wide (a stamp of 1e6 s, which once made the scorer skip a million cycles, is not).
+        self.window = M.StampWindow(ahead_s=60.0)
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
@@ -203,16 +218,20 @@ class MetricsNode(Node):
             self.writer.add_topic(topic, msgtype, C.TOPIC_QOS[topic].preset)
         self.clock_ns = 0
         self.counts = {t: 0 for t in TOPICS}
+        self.guard.publish_status(self.get_name(), lambda: self.clock_ns)
         self.loop = HotLoop(self, batch_interval=batch)
         self.pub_indices = self.create_publisher(DiagnosticArray, T.INDICES,
                                                  C.TOPIC_QOS[T.INDICES].publisher())
         self.pub_status = self.create_publisher(DiagnosticArray, T.STATUS,
                                                 C.TOPIC_QOS[T.STATUS].publisher())
+        self.indices_signer = self.guard.signer(T.INDICES)
+        # /clock is not subscribed: it carries no tag (a bounded type, see sim_node.py);
+        # the clock of each tick is written from the authenticated joint states.
         for topic in TOPICS:
-            if topic in (T.INDICES, T.CLOCK):
+            if topic in (T.INDICES, T.CLOCK, T.JOINT_STATES):
                 continue
             self._subscribe(topic)
-        self._subscribe(T.CLOCK)  # last: the sim waits for it before tick 0
+        self._subscribe(T.JOINT_STATES)  # last: the sim waits for it before tick 0
         self.announcer = ParamAnnouncer(self, self.period, lambda: self.scorer.latest + 1)
         self.log.info(f"recording to {self.bag_path}")
 
@@ -236,33 +255,58 @@ class MetricsNode(Node):
                           f"(from sim time {log_time * 1e-9:.3f} s)")
 
     def _subscribe(self, topic: str) -> None:
+        # Every message is authenticated and checked by the guard first (a dropped one is
+        # counted and reported, never recorded); the bag gets the payload without trailer.
         q = C.TOPIC_QOS[topic]
-        if topic in CYCLE_TOPICS:
+        g = self.guard
+        period_ns = int(round(self.period * 1e9))
+        if topic in CYCLE_TOPICS or topic == T.JOINT_COMMANDS:
             def cb(data: bytes, topic: str = topic) -> None:
-                stamp = C.decode_stamp(data)
-                self._write(topic, stamp, data)
+                got = g.joint_state_payload(topic, data, period_ns, self.window,
+                                            topic == T.JOINT_STATES)
+                if got is None:
+                    return
+                payload, view = got
+                stamp = view.stamp_ns
                 if topic == T.JOINT_STATES:
-                    self._write_controller(self.controller_times.on_state(stamp,
-                                                                          frame_of(data)))
-                for cycle in self.scorer.add(topic, stamp, data):
-                    self._publish_cycle(cycle)
-        elif topic == T.CLOCK:
-            def cb(data: bytes, topic: str = topic) -> None:
-                self.clock_ns = max(self.clock_ns, C.decode_stamp(data))
-                self._write(topic, C.decode_stamp(data), data)
+                    self.clock_ns = max(self.clock_ns, stamp)
+                    self._write(T.CLOCK, stamp, C.encode_clock(stamp))
+                self._write(topic, stamp, payload)
+                if topic == T.JOINT_STATES:
+                    self._write_controller(self.controller_times.on_state(stamp, view.frame_id))
+                if topic in CYCLE_TOPICS:
+                    for cycle in self.scorer.add(topic, stamp, payload):
+                        self._publish_cycle(cycle)
         elif topic == T.MARKERS:  # the first marker's stamp (the latest clock if empty)
             def cb(data: bytes, topic: str = topic) -> None:
-                stamp = marker_array_stamp(data)
-                self._write(topic, self.clock_ns if stamp is None else stamp, data)
+                payload = g.payload(topic, data)
+                if payload is None:
+                    return
+                stamp = marker_array_stamp(payload)
+                self._write(topic, self.clock_ns if stamp is None else stamp, payload)
         elif topic == T.PARAMETERS:
             cb = self._on_param_record
         elif topic == T.ACTIVE_CONTROLLER:  # at the tick the switch took effect
             def cb(data: bytes, topic: str = topic) -> None:
-                self._write_controller(
-                    self.controller_times.on_controller(C.decode_string(data), data))
-        else:  # stamped: joint_commands, status
+                got = g.string(topic, data, CONTROLLERS)
+                if got is None:
+                    return
+                self._write_controller(self.controller_times.on_controller(got[1], got[0]))
+        else:  # status (diagnostic arrays of the graph's nodes)
             def cb(data: bytes, topic: str = topic) -> None:
-                self._write(topic, C.decode_stamp(data), data)
+                payload = g.payload(topic, data)
+                if payload is None:
+                    return
+                try:
+                    stamp, _ = cdr.decode_diagnostic_array(payload)
+                    self.window.check(stamp)
+                except BagReadError as err:
+                    g.drop(topic, M.UNDECODABLE, str(err))
+                    return
+                except M.Dropped as d:
+                    g.drop(topic, d.cause, d.detail)
+                    return
+                self._write(topic, stamp, payload)
         self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
 
     def _on_param_record(self, data: bytes) -> None:
@@ -303,7 +347,7 @@ class MetricsNode(Node):
                                 cycle["t_b"], growth)
         stamp = T.stamp_ns(cycle["t_b"])
         data = cdr.encode_diagnostic_array(stamp, [status])
-        self.pub_indices.publish(data)
+        self.pub_indices.publish(self.indices_signer.sign(data))
         self._write(T.INDICES, stamp, data)
         self.log.info(
             f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
@@ -328,7 +372,10 @@ class MetricsNode(Node):
                 self.failure = err
         report = {"bag": str(self.bag_path), "messages": self.counts,
                   "dropped_parameter_messages": self.bad_param_records,
-                  "parameter_records": len(self.params_log.records), **self.scorer.report(),
+                  "parameter_records": len(self.params_log.records),
+                  "dropped": {f"{t} ({c})": n for (t, c), n in self.guard.drops.counts.items()},
+                  "outside_publishers": {t: sorted(n) for t, n in self.guard.outsiders.items()},
+                  **self.scorer.report(),
                   "recording": self.recording_report()}
         try:
             (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
@@ -341,7 +388,8 @@ class MetricsNode(Node):
         self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
             f"{len(self.scorer.cycles)} cycles scored"
-            + (f", {late} came in after their chunk" if late else "") + ")")
+            + (f", {late} came in after their chunk" if late else "") + ")"
+            + f"; inputs: {self.guard.summary()}")
 
     closed = False
 
@@ -363,7 +411,8 @@ class MetricsNode(Node):
                   "messages_lost": str(self.writer.lost_messages + self.dropped),
                   "exit_code": str(EXIT_RECORDING_FAILED)}
         status = C.Status("metrics", "error", f"recording stopped: {err}", values)
-        self.pub_status.publish(C.diagnostic_array(self.clock_ns, [status]))
+        self.pub_status.publish(self.guard.signed(self.guard.signer(T.STATUS),
+                                                  C.diagnostic_array(self.clock_ns, [status])))
         self.pub_status.wait_for_all_acked(Duration(seconds=2))
         self.log.error(f"recording stopped at sim time {self.clock_ns * 1e-9:.3f} s: {err}")
 
@@ -382,7 +431,7 @@ def main(args: list[str] | None = None) -> int:
             code = EXIT_RECORDING_FAILED
     except (HexapodError, BagError) as err:
         rclpy.logging.get_logger("metrics").error(str(err))
-        code = 2 if isinstance(err, ParameterError) else 1
+        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -44,10 +44,13 @@ _STAMP = struct.Struct("<iI")
 HISTORY_DEPTH = 5000
 #: Depth of the recorder's subscriptions (reader-side queue between two takes).
 RECORD_DEPTH = 10000
-#: Depth of the controllers' and trajectory generator's subscriptions (a controller that is
-#: not in charge lets its queues of reference and foot forces roll over, and takes them all
-#: when it is put in charge: keep that short).
-CONTROL_DEPTH = 10
+#: Depth of the control loop's subscriptions (sim, controllers, trajectory generator,
+#: markers): a process starved of CPU for up to this many ticks (0.2 s at 1 kHz), or a
+#: topic flooded by a process outside the graph (whose messages are dropped, but fill the
+#: queue first), still finds every message it needs. With 10, a controller taking over in
+#: realtime mode on a loaded machine sometimes found the switch tick's state or inputs
+#: rolled out of its queues and never answered it.
+CONTROL_DEPTH = 200
 
 
 def _qos(depth: int, transient: bool = False) -> QoSProfile:

@@ -53,8 +53,10 @@ as an error and ends the process with exit code 1.
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -73,18 +75,22 @@ from .core import topics as T
 from .core.actuator import saturate
 from .core.engine import Physics
 from .core.errors import DivergenceError, HexapodError, ParameterError
+from .core import msg_checks as M
 from .core.layout import O_THV, P_TMAX
+from .core.msg_auth import AuthError
 from .core.params import N_LEGS, HexapodParams, check_controller
+from .core.switch_channel import ChannelError, SwitchServer
 from .hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from .param_topic import ParamAnnouncer
+from .input_guard import InputGuard
 from .ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "trajectory_generator": ((T.CLOCK,), (T.REFERENCE,)),
+    "trajectory_generator": ((T.JOINT_STATES,), (T.REFERENCE,)),
     "pd_p_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
     "pd_pf_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
-    "metrics": ((T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
+    "metrics": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
                  T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS), ()),
 }
 DEFAULT_WAIT_FOR = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
@@ -101,6 +107,7 @@ class SimNode(Node):
     def __init__(self) -> None:
         super().__init__("hexapod_sim")
         self.log = FastLogger(self.get_logger().name)
+        self.guard = InputGuard(self, self.log)  # authenticates and checks every input
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.stop_at_end = declare_node_param(
             self, "stop_at_end", False, "stop (and exit) after the tick at run.duration")
@@ -133,9 +140,19 @@ class SimNode(Node):
                     for t, q in C.TOPIC_QOS.items()
                     if t in (T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.STATUS,
                              T.ACTIVE_CONTROLLER)}
+        self.signers = {t: self.guard.signer(t) for t in self.pub if t != T.CLOCK}
         self.cmd_sub = self.loop.subscribe(
             JointState, T.JOINT_COMMANDS, self._on_command,
             C.TOPIC_QOS[T.JOINT_COMMANDS].subscriber(C.CONTROL_DEPTH))
+        # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
+        self.channel: SwitchServer | None = None
+        try:
+            self.channel = SwitchServer.open(os.environ.get("ROS_DOMAIN_ID", "0"))
+        except (ChannelError, OSError) as err:
+            self.log.warning(f"no local switch channel ({err}); `hexapod switch` uses the "
+                             f"ROS parameter service instead")
+        self.state_clients: dict[str, Any] = {}
+        self.state_checks: list[tuple[str, str, Any]] = []  # (controller, reply to, future)
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(STATUS_PERIOD, self._publish_status, clock=self.steady)
 
@@ -149,6 +166,7 @@ class SimNode(Node):
         self.answered = False
         self.advanced = False  # realtime: the current tick's command applied, next tick ready
         self.newest: np.ndarray | None = None  # realtime: newest command not yet applied
+        self.newest_stamp = -1  # its stamp (an older late command never replaces it)
         self.started = False
         self.finished = False
         self.missed = self.late = self.on_time = self.foreign = self.resyncs = 0
@@ -240,7 +258,7 @@ class SimNode(Node):
 
     def start(self) -> None:
         """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
-        self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
+        self._announce()
         if self.wait_for:
             self.log.info(f"waiting for {', '.join(self.wait_for)} "
                           f"(at most {self.startup_timeout:g} s)")
@@ -266,6 +284,11 @@ class SimNode(Node):
         self._prepare()
         self._send()
 
+    def _announce(self) -> None:
+        """Publish the controller in charge on /hexapod/active_controller (signed)."""
+        self.pub[T.ACTIVE_CONTROLLER].publish(self.guard.signed(
+            self.signers[T.ACTIVE_CONTROLLER], String(data=self.in_charge)))
+
     # ------------------------------------------------------------------ ticks
     def _prepare(self) -> None:
         """Sample the current tick and serialize its messages (not sent yet)."""
@@ -278,8 +301,11 @@ class SimNode(Node):
         for topic, frame in ((T.FOOT_FORCES, ""), (T.JOINT_STATES, self.in_charge),
                              (T.HIP_STATES, "")):
             c = T.state_columns(obs, topic)
-            out.append((self.pub[topic], cs[topic].encode(stamp, frame, c.position, c.velocity,
-                                                          c.effort)))
+            out.append((self.pub[topic], self.signers[topic].sign(
+                cs[topic].encode(stamp, frame, c.position, c.velocity, c.effort))))
+        # rosgraph_msgs/Clock is a bounded type: Fast DDS refuses a sample longer than 12
+        # bytes, so /clock carries no tag. No node of the graph acts on it (the trajectory
+        # generator follows the authenticated states; the recorder writes /clock from them).
         out.append((self.pub[T.CLOCK], C.encode_clock(stamp)))
         self.prepared = (k, stamp, out)
 
@@ -315,15 +341,23 @@ class SimNode(Node):
     def _on_command(self, data: bytes) -> None:
         if self.finished:
             return
-        cmd = self.codecs[T.JOINT_COMMANDS].decode(data)
+        cmd = self.guard.joint_state(T.JOINT_COMMANDS, data, self.period_ns)
+        if cmd is None:  # dropped (and counted) by the guard
+            return
+        if cmd.stamp_ns > max(self.stamp, 0):
+            self.guard.drop(T.JOINT_COMMANDS, M.BAD_STAMP,
+                            f"stamp {cmd.stamp_ns * 1e-9:.9g} s is ahead of the current tick")
+            return
         if cmd.frame_id != self.in_charge:
             self.foreign += 1
             return
         if cmd.stamp_ns != self.stamp or self.answered or not self.started:
             if cmd.stamp_ns < self.stamp:
                 self.late += 1
-                if self.mode == "realtime" and not self.advanced:
+                if (self.mode == "realtime" and not self.advanced
+                        and cmd.stamp_ns > self.newest_stamp):
                     self.newest = cmd.effort.reshape(N_LEGS, 2).copy()
+                    self.newest_stamp = cmd.stamp_ns
             return
         self.answered = True
         lat = int((time.monotonic() - self.published_at) / LATENCY_BIN)
@@ -338,6 +372,7 @@ class SimNode(Node):
         # Realtime: integrate and serialize the next tick now, send it when its time comes.
         self.on_time += 1
         self.newest = None
+        self.newest_stamp = cmd.stamp_ns
         self._step(demand)
         self.advanced = True
         if self.physics.tick == 1:  # the schedule starts: tick 1 goes out now
@@ -411,6 +446,8 @@ class SimNode(Node):
             saturate(damping, P[P_TMAX], self.torque)
         # else: hold self.torque, the torque applied over the last period
         self.physics.advance_tick(self.torque)
+        if self.channel is not None:
+            self._serve_channel()
         if self.switch_to and self.physics.tick * self.period >= self.switch_at - 1e-12:
             to, self.switch_to = self.switch_to, ""
             result = self.set_parameters([Parameter("run.controller", value=to)])[0]
@@ -429,9 +466,69 @@ class SimNode(Node):
             k = self.physics.tick
             self.log.info(f"switched {old} -> {self.in_charge} at tick {k} "
                           f"(t = {k * self.period:.3f} s)")
-            self.pub[T.ACTIVE_CONTROLLER].publish(String(data=self.in_charge))
+            self._announce()
         self.announcer.flush(self.physics.tick)
         self._prepare()
+
+    # ------------------------------------------------------------------ local switch channel
+    def _serve_channel(self) -> None:
+        """Take `hexapod switch` requests (at a tick boundary): check the target controller's
+        lifecycle state, then set run.controller as a ROS client would."""
+        assert self.channel is not None
+        if self.state_checks:
+            done = [c for c in self.state_checks if c[2].done()]
+            self.state_checks = [c for c in self.state_checks if not c[2].done()]
+            for to, addr, future in done:
+                self._switch_checked(to, addr, future)
+        for text, addr in self.channel.poll():
+            parts = text.split()
+            if len(parts) != 2 or parts[0] != "switch":
+                self.channel.reply(addr, f"error unknown request {text[:60]!r} "
+                                         f"(expected 'switch pd_p|pd_pf')")
+                continue
+            to = parts[1]
+            try:
+                check_controller(to)
+            except ParameterError as err:
+                self.channel.reply(addr, f"error {err}")
+                continue
+            if to == self.in_charge and self.pending_controller is None:
+                self.channel.reply(addr, f"ok {to} already in charge")
+                continue
+            self._ask_state(to, addr)
+
+    def _ask_state(self, to: str, addr: str) -> None:
+        from lifecycle_msgs.srv import GetState
+
+        name = f"{to}_controller"
+        client = self.state_clients.get(name)
+        if client is None:
+            client = self.state_clients[name] = self.create_client(GetState,
+                                                                   f"/{name}/get_state")
+            self.loop.refresh()
+        if not client.service_is_ready():
+            assert self.channel is not None
+            self.channel.reply(addr, f"error controller node {name} is not running on "
+                                     f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
+                                     f"(no /{name}/get_state): start it first")
+            return
+        self.state_checks.append((to, addr, client.call_async(GetState.Request())))
+
+    def _switch_checked(self, to: str, addr: str, future: Any) -> None:
+        assert self.channel is not None
+        res = future.result()
+        state = res.current_state.label if res is not None else "not answering"
+        if state != "active":
+            self.channel.reply(addr, f"error {to}_controller is {state}: not active")
+            return
+        old = self.in_charge
+        result = self.set_parameters([Parameter("run.controller", value=to)])[0]
+        if not result.successful:
+            self.channel.reply(addr, f"error hexapod_sim refused run.controller = {to}: "
+                                     f"{result.reason}")
+            return
+        self.log.info(f"switch to {to} requested through the local switch channel")
+        self.channel.reply(addr, f"ok switching {old} -> {to} at the next tick")
 
     # ------------------------------------------------------------------ status
     def status(self) -> C.Status:
@@ -452,6 +549,8 @@ class SimNode(Node):
             level, msg = "ok", "finished"
         else:
             level, msg = "ok", "running"
+        if level == "ok" and (self.guard.drops.total or self.guard.key is None):
+            level, msg = "warn", f"{msg}; {self.guard.drops.summary()}"
         values = {
             "mode": self.mode, "sim_time": f"{k * self.period:.6f}", "tick": str(k),
             "controller": self.in_charge, "missed_ticks": str(self.missed),
@@ -464,13 +563,15 @@ class SimNode(Node):
             "round_trip_median_ms": f"{self.latency_ms(0.5):.3f}",
             "round_trip_p99_ms": f"{self.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
+            "foreign_commands": str(self.foreign), **self.guard.values(),
         }
         return C.Status("hexapod_sim", level, msg, values)
 
     def _publish_status(self) -> None:
+        self.guard.refresh()
         msg: DiagnosticArray = C.diagnostic_array(self.stamp if self.stamp >= 0 else 0,
                                                   [self.status()])
-        self.pub[T.STATUS].publish(msg)
+        self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], msg))
 
     def latency_ms(self, q: float) -> float:
         """Quantile ``q`` of the state -> command round trip (ms, from the histogram)."""
@@ -490,7 +591,9 @@ class SimNode(Node):
                 f"{self.fallback_episodes} fallback episodes, {self.switches} switches "
                 f"({self.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
                 f"{self.resyncs} resyncs; round trip median {self.latency_ms(0.5):.2f} ms, p99 "
-                f"{self.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}")
+                f"{self.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}; "
+                f"{self.foreign} commands from a controller not in charge; inputs: "
+                f"{self.guard.summary()}")
 
     def flush(self, timeout: float = 2.0) -> None:
         """Wait (at most ``timeout`` s in all) until subscribers acknowledged every message."""
@@ -511,7 +614,7 @@ def main(args: list[str] | None = None) -> int:
         install_stop_signals(node.loop)
         node.start()
         node.loop.spin()
-    except ParameterError as err:
+    except (ParameterError, AuthError) as err:
         rclpy.logging.get_logger("hexapod_sim").error(str(err))
         code = 2
     except DivergenceError as err:
@@ -529,6 +632,8 @@ def main(args: list[str] | None = None) -> int:
                 node.log.info(node.summary())
                 node._publish_status()
             node.flush()
+            if node.channel is not None:
+                node.channel.close()
             node.loop.destroy()
             node.destroy_node()
         rclpy.try_shutdown()

@@ -1,0 +1,176 @@
+#!/usr/bin/env python3
+"""Realtime switching (S5, docs/benchmarks.md): lost switch ticks and on-time ticks.
+
+Each run starts a fresh graph in realtime mode (1 kHz by default) on its own
+ROS_DOMAIN_ID, and, with --switches N, hands control back and forth N times, one switch
+every --every simulated seconds, through the sim's standard ``set_parameters`` service from
+one client node that joined before tick 0 (what `hexapod switch` does, without a new
+process per switch). From the bag it counts, per switch, the ticks from the one before the
+switch to 3 after it that no command of the controller named in the state answered
+(late or not): a switch with any such tick *lost a tick*. It also prints the share of
+ticks whose command arrived within its period, with and without switching.
+
+--hog adds one CPU hog (a busy loop in its own process) beside the graph.
+
+Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
+       [--no-baseline]
+(run through `scripts/env.sh`, or it re-executes itself inside it).
+"""
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics,bench_switch"
+SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time")
+
+
+def _reexec_in_env() -> None:
+    if os.environ.get("VIRTUAL_ENV") == str(ROOT / ".venv"):
+        return
+    subprocess.run([str(ROOT / "scripts" / "setup.sh"), "--quiet"], check=True)
+    cmd = f'source "{ROOT}/scripts/env.sh" && exec python "$0" "$@"'
+    os.execvp("bash", ["bash", "-c", cmd, __file__, *sys.argv[1:]])
+
+
+def _hog() -> None:
+    while True:
+        pass
+
+
+def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
+               ) -> tuple[list[int], list[int]]:
+    """(switch ticks, lost ticks per switch) from a bag of the graph; with ``at``, the same
+    count around those ticks instead (the baseline of a run without switches)."""
+    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_sim import conversions as C
+    from hexapod_sim.core import topics as T
+
+    frames: dict[str, dict[int, str]] = {T.JOINT_STATES: {}, T.JOINT_COMMANDS: {}}
+    with open_bag(bag) as b:
+        for topic, out in frames.items():
+            codec = C.CODECS[topic]
+            for _, _, data in b.messages([topic]):
+                msg = codec.decode(bytes(data))
+                out[C.tick_of(msg.stamp_ns, period_ns)] = msg.frame_id
+    states, commands = frames[T.JOINT_STATES], frames[T.JOINT_COMMANDS]
+    n = max(states)
+    switches = at if at is not None else [k for k in range(1, n + 1)
+                                          if states.get(k) != states.get(k - 1)]
+    lost = [sum(1 for j in range(s - 1, min(n, s + 4)) if commands.get(j) != states.get(j))
+            for s in switches]
+    return switches, lost
+
+
+def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path) -> dict:
+    """One realtime run; the sim's figures and the lost ticks of each switch."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    from hexapod_metrics.cmd_graph import GraphProcesses
+
+    duration = args.every * (switches + 1) if switches else args.duration
+    g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
+                       overrides=(f"sim.dt:={args.dt}", f"sim.control_period:={args.period}",
+                                  "sim.mode:=realtime"))
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node("bench_switch", context=ctx, start_parameter_services=False)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    client = node.create_client(SetParameters, "/hexapod_sim/set_parameters")
+    try:
+        g.start("metrics", f"bag_path:={log_dir / 'bag'}")
+        for name in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
+            g.start(name)
+        g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+                f"wait_for:={ALL}")
+        g.wait_log("hexapod_sim", "realtime mode", timeout=180)
+        assert client.wait_for_service(timeout_sec=60), "no /hexapod_sim/set_parameters"
+        start = time.monotonic()
+        target = "pd_p"
+        for i in range(switches):
+            due = start + (i + 1) * args.every
+            while time.monotonic() < due:
+                ex.spin_once(timeout_sec=max(0.0, min(0.01, due - time.monotonic())))
+            value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=target)
+            future = client.call_async(SetParameters.Request(
+                parameters=[Parameter(name="run.controller", value=value)]))
+            ex.spin_until_future_complete(future, timeout_sec=10)
+            target = "pd_pf" if target == "pd_p" else "pd_p"
+        g.wait_exit("hexapod_sim", duration * 20 + 120)
+    finally:
+        g.stop_all(order=("hexapod_sim", "trajectory_generator", "pd_p_controller",
+                          "pd_pf_controller", "metrics"))
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    m = SUMMARY.search(g.log("hexapod_sim"))
+    if m is None:
+        raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
+    ticks, missed, late, on_time = (int(x) for x in m.groups())
+    period_ns = int(round(args.period * 1e9))
+    # Without switches: the same windows at the same schedule, as the baseline.
+    at = None if switches else [int(round(i * args.every / args.period))
+                                for i in range(1, int(duration / args.every))]
+    done, lost = lost_ticks(log_dir / "bag", period_ns, at)
+    return {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
+            "switches": len(done), "lost": lost}
+
+
+def main() -> int:
+    _reexec_in_env()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--switches", type=int, default=50)
+    ap.add_argument("--every", type=float, default=0.2, help="simulated s between switches")
+    ap.add_argument("--period", type=float, default=0.001, help="control period (s)")
+    ap.add_argument("--dt", type=float, default=1e-4, help="physics step (s)")
+    ap.add_argument("--duration", type=float, default=10.0, help="s of the run without switches")
+    ap.add_argument("--hog", action="store_true", help="one CPU hog beside the graph")
+    ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
+    args = ap.parse_args()
+    hog = None
+    if args.hog:
+        hog = multiprocessing.Process(target=_hog, daemon=True)
+        hog.start()
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
+          f"{', one CPU hog' if hog else ''}; realtime mode, {1 / args.period:g} Hz")
+    base = 170 + os.getpid() % 60
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
+            runs = [("switching", args.switches)]
+            if not args.no_baseline:
+                runs.insert(0, ("no switch", 0))
+            for i, (label, n) in enumerate(runs):
+                r = run(args, n, (base + i) % 101 + 1, Path(tmp) / f"run{i}")
+                pct = 100.0 * r["on_time"] / max(r["ticks"], 1)
+                line = (f"{label}: {r['ticks']} ticks, {pct:.2f} % on time, missed "
+                        f"{r['missed']}, late {r['late']}")
+                bad = sum(1 for x in r["lost"] if x)
+                if n:
+                    line += (f"; switches {r['switches']} of {n}, switches with a lost tick: "
+                             f"{bad} of {r['switches']} (lost ticks per switch {r['lost']})")
+                else:
+                    line += (f"; baseline: {bad} of {r['switches']} windows of 5 ticks at the "
+                             f"switch schedule have an unanswered tick")
+                print(line, flush=True)
+    finally:
+        if hog is not None:
+            hog.terminate()
+            hog.join()
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

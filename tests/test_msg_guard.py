@@ -1,0 +1,187 @@
+"""Message authentication and input checks of the graph's subscribers (no ROS graph needed)."""
+from __future__ import annotations
+
+import os
+import stat
+
+import numpy as np
+import pytest
+
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core.msg_auth import (AuthError, Rejected, Signer, TRAILER_BYTES, Verifier,
+                                       new_key_file, read_key_file, run_key)
+
+
+@pytest.fixture
+def key() -> bytes:
+    return os.urandom(32)
+
+
+@pytest.mark.parametrize("size", [0, 1, 7, 8, 14, 524])
+def test_signed_message_round_trips_and_is_8_byte_aligned(key, size):
+    payload = os.urandom(size)
+    data = Signer(key, "/t").sign(payload)
+    assert len(data) % 8 == 0 and len(data) >= size + TRAILER_BYTES
+    assert Verifier(key, "/t").verify(data) == payload
+
+
+def test_wrong_key_topic_or_any_changed_byte_is_unauthenticated(key):
+    data = Signer(key, "/hexapod/joint_commands").sign(b"\x00\x01\x00\x00" + bytes(100))
+    for bad_key, topic in ((os.urandom(32), "/hexapod/joint_commands"),
+                           (key, "/hexapod/joint_states")):
+        with pytest.raises(Rejected, match="unauthenticated"):
+            Verifier(bad_key, topic).verify(data)
+    for i in range(len(data)):
+        tampered = bytearray(data)
+        tampered[i] ^= 0x01
+        with pytest.raises(Rejected, match="unauthenticated"):
+            Verifier(key, "/hexapod/joint_commands").verify(bytes(tampered))
+    for short in (b"", data[:TRAILER_BYTES - 1], data[:-1]):
+        with pytest.raises(Rejected, match="unauthenticated"):
+            Verifier(key, "/hexapod/joint_commands").verify(short)
+
+
+def test_a_replayed_or_older_message_is_rejected_and_senders_are_kept_apart(key):
+    a, b = Signer(key, "/t"), Signer(key, "/t")
+    v = Verifier(key, "/t")
+    m1, m2 = a.sign(b"one"), a.sign(b"two")
+    n1 = b.sign(b"other sender")
+    assert v.verify(m2) == b"two"
+    for old in (m2, m1):
+        with pytest.raises(Rejected, match="replayed"):
+            v.verify(old)
+    assert v.verify(n1) == b"other sender"  # a second publisher has its own sequence
+
+
+def test_key_file_is_private_and_checked(tmp_path):
+    path = new_key_file(tmp_path)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    assert stat.S_IMODE(path.parent.stat().st_mode) == 0o700
+    key = read_key_file(path)
+    assert len(key) == 32
+    assert run_key({"HEXAPOD_KEY_FILE": str(path)}) == key
+    assert run_key({"HEXAPOD_AUTH": "off"}) is None
+    with pytest.raises(AuthError, match="no run key: set HEXAPOD_KEY_FILE"):
+        run_key({})
+    with pytest.raises(AuthError, match="allowed 'on' or 'off'"):
+        run_key({"HEXAPOD_AUTH": "maybe", "HEXAPOD_KEY_FILE": str(path)})
+    path.chmod(0o644)
+    with pytest.raises(AuthError, match="mode 0600"):
+        read_key_file(path)
+    path.chmod(0o600)
+    path.write_text("abcd\n")
+    with pytest.raises(AuthError, match="2 bytes, expected 32"):
+        read_key_file(path)
+    with pytest.raises(AuthError, match="cannot read it"):
+        read_key_file(tmp_path / "missing")
+
+
+def test_drop_counter_reports_per_topic_and_cause():
+    c = M.DropCounter()
+    assert c.summary() == "no message dropped" and c.values() == {"dropped": "0"}
+    c.add("/a", M.UNAUTHENTICATED)
+    c.add("/a", M.UNAUTHENTICATED)
+    assert c.add("/b", M.NON_FINITE) == 1
+    assert c.total == 3 and c.by_topic("/a") == 2
+    assert c.summary() == ("dropped 3 messages: /a 2 unauthenticated, /b 1 non-finite values")
+    assert c.values()["dropped /a (unauthenticated)"] == "2"
+
+
+def test_stamp_checks():
+    assert M.check_stamp(3_000_000, 1_000_000) == 3
+    for bad in (-1, 3_000_500):
+        with pytest.raises(M.Dropped) as e:
+            M.check_stamp(bad, 1_000_000)
+        assert e.value.cause == M.BAD_STAMP
+    w = M.StampWindow(ahead_s=1.0, increasing=True)
+    w.check(10**8)  # no time yet: within ahead_s of 0 ...
+    with pytest.raises(M.Dropped, match="ahead of the run"):
+        w.check(10**15)
+    w.advance(5 * 10**9)  # the first time-source stamp anchors
+    w.advance(5 * 10**9 + 1_000_000)
+    for bad in (5 * 10**9, 7 * 10**9, -1):  # not after, too far ahead, negative
+        with pytest.raises(M.Dropped, match="stamp"):
+            w.advance(bad)
+    w.check(4 * 10**9)
+    with pytest.raises(M.Dropped, match="ahead of the run"):
+        w.check(10**15)
+    now = [0.0]
+    starved = M.StampWindow(ahead_s=1.0, increasing=True, rate=10.0, clock=lambda: now[0])
+    starved.advance(5 * 10**9)
+    now[0] = 2.0  # 2 wall s without a state: the run went on, up to 1 + 20 s ahead is fine
+    starved.advance(9 * 10**9)
+    with pytest.raises(M.Dropped, match="ahead of the run"):
+        starved.advance(10**15)
+    back = M.StampWindow()
+    back.advance(9 * 10**9)
+    back.advance(1_000_000)  # may go back (a new run), newest stays the maximum
+    assert back.newest == 9 * 10**9
+
+
+def test_finite_check():
+    M.check_finite([np.zeros(3), np.ones(2)])
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(M.Dropped) as e:
+            M.check_finite([np.zeros(3), np.array([0.0, bad])])
+        assert e.value.cause == M.NON_FINITE
+
+
+def test_guard_decoding_of_malformed_joint_states():
+    pytest.importorskip("rclpy", reason="the guard lives on the node side (scripts/setup.sh)")
+    from hexapod_sim import conversions as C
+    from hexapod_sim.core import topics as T
+    from hexapod_sim.input_guard import _decode
+
+    codec = C.CODECS[T.JOINT_COMMANDS]
+    good = codec.encode(5_000_000, "pd_pf", np.zeros(12), np.zeros(12), np.ones(12))
+    assert _decode(codec, good).stamp_ns == 5_000_000
+    cases = {b"": M.UNDECODABLE, good[:3]: M.UNDECODABLE, good[:40]: M.UNDECODABLE,
+             b"\x01\x00" + good[2:]: M.UNDECODABLE,  # big-endian encapsulation
+             good[:12] + b"\xff\xff\xff\x7f" + good[16:]: M.UNDECODABLE,
+             C.CODECS[T.FOOT_FORCES].encode(0, "", np.zeros(12), np.zeros(12), np.zeros(12)):
+                 M.WRONG_SHAPE,
+             good[:8] + (2_000_000_000).to_bytes(4, "little") + good[12:]: M.BAD_STAMP}
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        n = int(rng.integers(0, len(good)))
+        cases[good[:n]] = None  # truncated anywhere: undecodable or wrong shape
+        cases[bytes(rng.integers(0, 256, int(rng.integers(0, 700)), dtype=np.uint8))] = None
+    for data, cause in cases.items():
+        if data == good:
+            continue
+        with pytest.raises(M.Dropped) as e:
+            _decode(codec, data)
+        assert cause is None or e.value.cause == cause, (data[:20], e.value)
+
+
+def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
+    import threading
+
+    from hexapod_sim.core.switch_channel import (ChannelError, SwitchServer, request,
+                                                 runtime_dir)
+
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    assert request("switch pd_p", 99, 1.0) is None  # no sim listens: the ROS path is used
+    server = SwitchServer.open(99)
+    assert stat.S_IMODE(runtime_dir().stat().st_mode) == 0o700
+    with pytest.raises(ChannelError, match="held by another sim"):
+        SwitchServer.open(99)
+    answers: list[str | None] = []
+    client = threading.Thread(target=lambda: answers.append(request("switch pd_p", 99, 5.0)))
+    client.start()
+    got: list[tuple[str, str]] = []
+    while not got:
+        got = server.poll()
+    assert got[0][0] == "switch pd_p"
+    server.reply(got[0][1], "ok switching pd_pf -> pd_p at the next tick")
+    client.join(5)
+    assert answers == ["ok switching pd_pf -> pd_p at the next tick"]
+    with pytest.raises(ChannelError, match="did not answer within 0.2 s"):
+        request("switch pd_p", 99, 0.2)
+    server.close()
+    stale = SwitchServer.open(99)  # a socket left behind by a dead sim is replaced
+    stale.sock.close()
+    SwitchServer.open(99).close()
+    runtime_dir().chmod(0o755)
+    with pytest.raises(ChannelError, match="mode 0700"):
+        SwitchServer.open(99)
