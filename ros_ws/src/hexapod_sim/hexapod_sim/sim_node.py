@@ -143,7 +143,10 @@ class SimNode(Node):
         self.signers = {t: self.guard.signer(t) for t in self.pub if t != T.CLOCK}
         self.cmd_sub = self.loop.subscribe(
             JointState, T.JOINT_COMMANDS, self._on_command,
-            C.TOPIC_QOS[T.JOINT_COMMANDS].subscriber(C.CONTROL_DEPTH))
+            # As deep as the writers' histories: a process flooding the topic (its messages are
+            # dropped) must not push the controller's command out of the queue while the sim
+            # is off the CPU (that costs a lockstep timeout).
+            C.TOPIC_QOS[T.JOINT_COMMANDS].subscriber(C.HISTORY_DEPTH))
         # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
         self.channel: SwitchServer | None = None
         try:
