@@ -353,6 +353,7 @@ NODE_PARAMS: dict[str, tuple[str, ...]] = {
     "pd_pf_controller": ("autostart",),
     "metrics": ("bag_path", "batch_interval"),
     "markers": ("rate",),
+    "foxglove_bridge": ("host", "port"),
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)
 
