@@ -26,9 +26,9 @@ ROOT = Path(__file__).resolve().parents[2]
 class Script:
     """scripts/run_graph.sh running in its own session, output in files."""
 
-    def __init__(self, tmp: Path, *args: str) -> None:
+    def __init__(self, tmp: Path, *args: str, bag: Path | None = None) -> None:
         self.domain = next_domain_id()
-        self.bag = tmp / "bag"
+        self.bag = bag or tmp / "bag"
         self.logs = Path(f"{self.bag}_logs")
         self.out = tmp / "stdout.txt"
         self.err = tmp / "stderr.txt"
@@ -116,6 +116,15 @@ def table_rows(stdout: str) -> list[str]:
     lines = stdout.splitlines()
     i = next(i for i, line in enumerate(lines) if line.startswith("indices per controller"))
     return [line.strip() for line in lines[i + 2:] if line.startswith("  ")]
+
+
+def test_default_scenario_exits_0_with_both_controllers_segments(script):
+    s = script("--duration", "3")
+    assert s.wait() == 0, s.stderr()
+    rows = table_rows(s.stdout())
+    assert [r.split()[0] for r in rows] == ["pd_pf", "pd_p"], s.stdout()
+    assert "0 missed" in s.stdout() and f"bag: {s.bag}" in s.stdout()
+    assert (s.bag / "indices.json").exists()
 
 
 def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(script):
@@ -273,3 +282,28 @@ def test_settings_on_the_running_graph_take_effect_or_are_refused(make_graph):
     assert sw.returncode == 0, sw.stderr
     assert "switching pd_pf -> pd_p" in sw.stdout and "was inactive, now active" in sw.stdout
     g.wait_log("hexapod_sim", "switched pd_pf -> pd_p", timeout=60)
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path):
+    """A 3 MB tmpfs (root only: mount); unmounted afterwards."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mnt)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs to fill (needs root): {r.stderr.strip()}")
+    yield mnt
+    subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def test_full_disk_exits_5_and_stops_the_graph(small_disk, tmp_path):
+    s = Script(tmp_path, "--duration", "6", bag=small_disk / "bag")
+    try:
+        code = s.wait()
+    finally:
+        s.kill_all()
+    err = s.stderr()
+    assert code == EXIT_CODES["disk full"] == 5, err
+    assert "disk full (exit 5): the recorder ran out of disk space" in err
+    assert f"bag: {s.bag}" in s.stdout()

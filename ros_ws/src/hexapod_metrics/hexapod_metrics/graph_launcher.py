@@ -62,6 +62,8 @@ STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_c
               "markers", "foxglove_bridge", "metrics")
 #: Words in the recorder's log (or its exit) that mean the disk is full.
 DISK_FULL_MARKERS = ("No space left on device", "ENOSPC", "disk full")
+#: Free bytes below which a failed recorder's disk counts as full.
+DISK_FULL_BYTES = 1 << 20
 #: Exit code with which the recorder reports a full disk (errno ENOSPC).
 RECORDER_DISK_FULL_EXIT = 28
 
@@ -305,13 +307,19 @@ class Launcher:
                   flush=True)
 
     def _disk_full(self, code: int | None) -> bool:
+        """Did the recorder stop because the bag's disk is full?  Its exit code, the words
+        of its log, or (a log on the same full disk may say nothing) the free space."""
         if code == RECORDER_DISK_FULL_EXIT:
             return True
+        if code == 0:
+            return False
         try:
+            if shutil.disk_usage(self.bag.parent).free < DISK_FULL_BYTES:
+                return True
             text = (self.logs / "metrics.log").read_text(errors="replace")
         except OSError:
             return False
-        return code != 0 and any(m in text for m in DISK_FULL_MARKERS)
+        return any(m in text for m in DISK_FULL_MARKERS)
 
     # ------------------------------------------------------------------ stop
     def stop(self) -> None:
