@@ -142,6 +142,10 @@ def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(s
         rows[-1].startswith("mixed(pd_pf+"), out
     assert not any(r.split()[0] == "pd_pf" for r in rows), out
     assert f"bag: {s.bag}" in out
+    doc = json.loads((s.bag / "indices.json").read_text())
+    last = doc["segments"][-1]["last_full_cycle"]
+    assert last["uncommanded_ticks"] > 0 and last["label"] != "pd_pf"
+    assert doc["cycles"][0]["label"] == "pd_pf" and doc["cycles"][0]["uncommanded_ticks"] == 0
 
 
 def test_fallback_alone_exits_7(script, tmp_path):
@@ -307,3 +311,24 @@ def test_full_disk_exits_5_and_stops_the_graph(small_disk, tmp_path):
     assert code == EXIT_CODES["disk full"] == 5, err
     assert "disk full (exit 5): the recorder ran out of disk space" in err
     assert f"bag: {s.bag}" in s.stdout()
+
+
+@pytest.mark.parametrize("node", ["hexapod_sim", "pd_pf_controller", "metrics"])
+@pytest.mark.parametrize("edit, message", [
+    (("k_y: 1000000.0", "k_yy: 1000000.0"),
+     "parameter 'ground.k_yy' = 1000000.0 is invalid: allowed a known parameter name (did you "
+     "mean 'ground.k_y'?)"),
+    (("    ground:", "    grond:"), "unknown group 'grond' (did you mean 'ground'?)"),
+])
+def test_node_started_by_hand_refuses_a_misspelt_params_file(make_graph, tmp_path, node, edit,
+                                                             message):
+    from hexapod_sim.core.params import default_params_path
+
+    f = tmp_path / "typo.yaml"
+    f.write_text(default_params_path().read_text().replace(*edit))
+    g = make_graph(params=str(f))
+    g.start(node, f"bag_path:={tmp_path / 'bag'}" if node == "metrics" else "wait_for:=''")
+    assert g.wait_exit(node, 120) == 2
+    log = g.log(node)
+    assert message in log and "Traceback" not in log
+    assert len([line for line in log.splitlines() if "ERROR" in line]) == 1

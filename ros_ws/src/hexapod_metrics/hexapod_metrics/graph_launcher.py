@@ -374,6 +374,8 @@ class Launcher:
                                  f"episode(s): joint damping from tick "
                                  f"{ranges[0][0] if ranges else '?'} (the controller in "
                                  f"charge went silent)")
+        if summary is not None:
+            label_indices_file(self.bag / "indices.json", summary)
         lines += indices_lines(self.bag / "indices.json", summary)
         return lines
 
@@ -412,6 +414,26 @@ def cycle_label(controller: str, t_a: float, t_b: float, period: float,
     if held >= b - a:
         return "fallback" if damped else "held"
     return f"mixed({controller}+{held} uncommanded)"
+
+
+def label_indices_file(path: Path, summary: dict[str, Any]) -> None:
+    """Add ``label`` (:func:`cycle_label`) and ``uncommanded_ticks`` to every cycle of
+    ``indices.json``, so that the file, too, never credits a controller with torques it did
+    not command; rewritten atomically. A missing or unreadable file is left alone."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return
+    period = doc["control_period"]
+    cycles = list(doc.get("cycles", [])) + [s["last_full_cycle"] for s in doc["segments"]
+                                             if s.get("last_full_cycle")]
+    for c in cycles:
+        a, b = round(c["t_a"] / period), round(c["t_b"] / period)
+        c["uncommanded_ticks"] = _overlap(summary.get("not_commanded_ticks", []), a, b)
+        c["label"] = cycle_label(c["controller"], c["t_a"], c["t_b"], period, summary)
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(doc, indent=1))
+    os.replace(tmp, path)
 
 
 def indices_lines(path: Path, summary: dict[str, Any] | None) -> list[str]:
