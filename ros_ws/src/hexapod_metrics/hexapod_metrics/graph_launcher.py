@@ -488,8 +488,8 @@ def run(argv: Sequence[str] | None = None, prog: str = "run_graph") -> int:
         for s, h in old.items():
             signal.signal(s, h)
     if launcher.stop_signal is not None and args.duration > 0:
-        launcher.outcome.add("interrupted", f"stopped by {signal.Signals(launcher.stop_signal).name} "
-                             f"before the end of the run")
+        name = signal.Signals(launcher.stop_signal).name
+        launcher.outcome.add("interrupted", f"stopped by {name} before the end of the run")
     for line in launcher.report():
         print(line)
     code = launcher.outcome.exit_code()

@@ -241,5 +241,5 @@ class ParamBinding:
             self._on_change(self.params, names)
 
 
-__all__ = ["LIVE", "ROS_OWN", "USES", "ParamBinding", "check_overrides", "used_by", "declare_node_param", "declare_params", "descriptor",
-           "is_live"]
+__all__ = ["LIVE", "ROS_OWN", "USES", "ParamBinding", "check_overrides", "declare_node_param",
+           "declare_params", "descriptor", "is_live", "used_by"]

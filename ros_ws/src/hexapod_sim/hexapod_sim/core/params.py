@@ -491,9 +491,9 @@ def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodPara
 
 
 __all__ = [
-    "ActuatorParams", "BodyParams", "CONTROLLERS", "GainParams", "GaitParams", "GroundParams",
-    "COMMON_NODE_PARAMS", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS", "N_LEGS",
-    "RobotParams", "YamlLoader", "nearest", "parse_yaml", "unknown_parameter", "RunParams", "SPECS", "SimParams", "Spec",
+    "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "GainParams",
+    "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
+    "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
     "check_controller", "check_value", "default_params_path", "from_flat", "load_params",
-    "read_params_file", "validate",
+    "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
 ]
