@@ -102,6 +102,9 @@ OPTIONS = [  # (options, text the one line must hold); both front ends take them
      "parameter name (did you mean 'ground.k_y'?)"),
     (["--set", "gait.duty_factor=1.5"], "parameter 'gait.duty_factor' = 1.5"),
     (["--set=actuator.t_max=1e-3x"], "parameter 'actuator.t_max' = '1e-3x'"),
+    (["--control-rate", "0"], "argument --control-rate: '0' is not a control rate (Hz)"),
+    (["--control-rate=abc"], "argument --control-rate: 'abc' is not a control rate (Hz)"),
+    (["--control-rate", "1500"], "parameter 'sim.control_period' = "),
     (["--no-such-option"], "unrecognized arguments: --no-such-option"),
 ]
 
@@ -125,8 +128,6 @@ GRAPH_ONLY = [
     (["--switch-at", "100"], "argument --switch-at: 100 s is after the end of the run"),
     (["--controller", "pd_x"], "argument --controller: invalid choice: 'pd_x'"),
     (["--mode=fast"], "argument --mode: invalid choice: 'fast'"),
-    (["--control-rate", "0"], "argument --control-rate: '0' is not a control rate (Hz)"),
-    (["--control-rate", "1500"], "parameter 'sim.control_period' = "),
     (["--duration"], "argument --duration: expected one argument"),
 ]
 

@@ -17,7 +17,7 @@ import numpy as np
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import HexapodParams, load_params
 
-from .cli_args import OneLineParser, param_value
+from .cli_args import OneLineParser, control_rate, param_value
 from .core.errors import BagError
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
@@ -32,7 +32,7 @@ def params_arguments(parser: argparse.ArgumentParser) -> None:
                         help="actuator saturation T_max in N m ('inf' for ideal actuators)")
     parser.add_argument("--ground-scale", type=param_value("ground.scale"), dest="ground_scale",
                         help="factor on all four ground parameters (1.0 = 100 %%)")
-    parser.add_argument("--control-rate", type=float, dest="control_rate", metavar="HZ",
+    parser.add_argument("--control-rate", type=control_rate, dest="control_rate", metavar="HZ",
                         help="control rate in Hz: sim.control_period = 1/HZ, a whole number "
                         "of physics steps (10000 = control at every step)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",

@@ -90,6 +90,10 @@ def number(lo: float = -math.inf, hi: float = math.inf, what: str = "a number",
     return convert
 
 
+#: ``--control-rate HZ`` (sim.control_period = 1/HZ), in the CLI and the graph launcher.
+control_rate = number(0.0, 1e6, "a control rate (Hz)", lo_open=True)
+
+
 def parse_range(text: str) -> list[float]:
     """'10:1000:21' (log-spaced), 'a:b:n:lin' (linear) or '1,2,3'; ValueError says why."""
     form = "'LO:HI:N' (log-spaced), 'LO:HI:N:lin' or a comma list of numbers"
@@ -134,5 +138,5 @@ def value_range(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-__all__ = ["OneLineParser", "number", "param_value", "parse_range", "read_number",
+__all__ = ["OneLineParser", "control_rate", "number", "param_value", "parse_range", "read_number",
            "value_range"]

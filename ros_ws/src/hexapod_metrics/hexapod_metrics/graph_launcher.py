@@ -40,7 +40,7 @@ from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                      default_params_path, load_params, read_params_file)
 
-from .cli_args import OneLineParser, number, param_value
+from .cli_args import OneLineParser, control_rate, number, param_value
 from .cmd_graph import GraphProcesses
 
 #: Exit codes of the launcher, one per cause (the first that applies, in this order).
@@ -117,8 +117,7 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
                    help="factor on the four ground parameters (1.0 = 100 %%)")
     p.add_argument("--t-max", dest="t_max", type=param_value("actuator.t_max"),
                    help="actuator saturation T_max in N m (.inf = ideal actuators)")
-    p.add_argument("--control-rate", dest="control_rate",
-                   type=number(10.0, 1e6, "a control rate (Hz)"),
+    p.add_argument("--control-rate", dest="control_rate", type=control_rate, metavar="HZ",
                    help="control rate in Hz (sets sim.control_period = 1/HZ)")
     p.add_argument("--params", help="ROS 2 params file (default: the shipped base experiment)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
