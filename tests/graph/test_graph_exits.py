@@ -137,20 +137,29 @@ def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(s
     assert code == EXIT_CODES["node died"] == 3, err
     assert "pd_pf_controller was killed by SIGKILL during the run" in err
     assert "fallback (exit 7)" in err  # the fallback is reported too
-    rows = table_rows(out)
-    assert rows and rows[-1].split()[0] in ("fallback", "held") or \
-        rows[-1].startswith("mixed(pd_pf+"), out
-    assert not any(r.split()[0] == "pd_pf" for r in rows), out
+    assert_uncommanded_cycles_are_labelled(s, "pd_pf")
     assert f"bag: {s.bag}" in out
+
+
+def assert_uncommanded_cycles_are_labelled(s: Script, controller: str) -> None:
+    """Cycles with ticks the controller did not command carry another label, in
+    indices.json and in the printed table; clean cycles keep the controller's name."""
     doc = json.loads((s.bag / "indices.json").read_text())
+    cycles = doc["cycles"]
+    assert any(c["uncommanded_ticks"] > 0 for c in cycles), cycles
+    for c in cycles:
+        assert (c["label"] == controller) == (c["uncommanded_ticks"] == 0), c
+    assert cycles[0]["label"] == controller
     last = doc["segments"][-1]["last_full_cycle"]
-    assert last["uncommanded_ticks"] > 0 and last["label"] != "pd_pf"
-    assert doc["cycles"][0]["label"] == "pd_pf" and doc["cycles"][0]["uncommanded_ticks"] == 0
+    row = table_rows(s.stdout())[-1]
+    assert row.split()[0] == last["label"], row
+    if last["uncommanded_ticks"]:
+        assert row.split()[0] in ("fallback", "held") or row.startswith(f"mixed({controller}+")
 
 
 def test_fallback_alone_exits_7(script, tmp_path):
     # the controller in charge is deactivated (not killed): no node dies, the sim falls back
-    s = script("--duration", "3", "--no-switch", "--controller", "pd_p")
+    s = script("--duration", "6", "--no-switch", "--controller", "pd_p")
     s.wait_log("metrics", "cycle 0 [0, 1] s")
     from lifecycle_msgs.msg import Transition
     from lifecycle_msgs.srv import ChangeState
@@ -161,9 +170,8 @@ def test_fallback_alone_exits_7(script, tmp_path):
         assert call(node, ChangeState, "/pd_p_controller/change_state", req).success
     code = s.wait()
     assert code == EXIT_CODES["fallback"] == 7, s.stderr()
-    assert "fallback (exit 7)" in s.stderr()
-    rows = table_rows(s.stdout())
-    assert not any(r.split()[0] == "pd_p" for r in rows[-1:]), s.stdout()
+    assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
+    assert_uncommanded_cycles_are_labelled(s, "pd_p")
 
 
 def test_killed_recorder_exits_4_and_stops_the_graph(script):
