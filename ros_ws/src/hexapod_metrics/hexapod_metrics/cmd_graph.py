@@ -33,6 +33,8 @@ from hexapod_sim.core.params import CONTROLLERS
 from hexapod_sim.dds_profile import private_profile
 from hexapod_sim.lifeline import PARENT_ENV
 
+from .cli_args import number
+
 #: node name -> (module, entry point)
 NODES: dict[str, tuple[str, str]] = {
     "hexapod_sim": ("hexapod_sim.sim_node", "main"),
@@ -51,6 +53,10 @@ NICE = {"metrics": 10, "foxglove_bridge": 10}
 #: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is
 #: off by default.
 SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
+
+
+#: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
+TIMEOUT = number(0.0, 3600.0, "a timeout (s)", lo_open=True)
 
 
 class GraphError(HexapodError):
@@ -336,11 +342,11 @@ def add_parser(subparsers: Any) -> None:
     """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
     sp = subparsers.add_parser("switch", help="hand control to another controller node")
     sp.add_argument("controller", choices=CONTROLLERS)
-    sp.add_argument("--timeout", type=float, default=10.0,
+    sp.add_argument("--timeout", type=TIMEOUT, default=10.0,
                     help="seconds to wait for the sim and the controller (default 10)")
     sp.set_defaults(func=_cmd_switch)
     st = subparsers.add_parser("status", help="what runs in the graph, mode, ticks")
-    st.add_argument("--timeout", type=float, default=5.0,
+    st.add_argument("--timeout", type=TIMEOUT, default=5.0,
                     help="seconds to wait for /hexapod/status (default 5)")
     st.add_argument("--json", action="store_true", help="print JSON")
     st.set_defaults(func=_cmd_status)
