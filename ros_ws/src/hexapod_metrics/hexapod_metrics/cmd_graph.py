@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import weakref
 from pathlib import Path
 from typing import IO, Any, Callable, Sequence
 
@@ -92,6 +93,7 @@ class GraphProcesses:
                 and "FASTRTPS_DEFAULT_PROFILES_FILE" not in self.env):
             self._private = Path(tempfile.mkdtemp(prefix="hexapod_graph_"))
             self.env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(self._private))
+            weakref.finalize(self, shutil.rmtree, self._private, True)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
 

@@ -478,25 +478,28 @@ def run(argv: Sequence[str] | None = None, prog: str = "run_graph") -> int:
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        launcher.start()
+        try:
+            launcher.start()
+        except OSError as err:  # the bag's or the logs' directory cannot be made
+            print(f"{prog}: error: cannot start the graph: {err}", file=sys.stderr)
+            return EXIT_CODES["bad settings"]
         launcher.watch()
         launcher.stop()
+        if launcher.stop_signal is not None and args.duration > 0:
+            name = signal.Signals(launcher.stop_signal).name
+            launcher.outcome.add("interrupted", f"stopped by {name} before the end of the run")
+        for line in launcher.report():
+            print(line)
+        for cause, line in launcher.outcome.causes.items():
+            print(f"{prog}: {cause} (exit {EXIT_CODES[cause]}): {line}", file=sys.stderr)
+        print(f"bag: {launcher.bag}", flush=True)
+        return launcher.outcome.exit_code()
     finally:
         if launcher.graph is not None and launcher.graph.procs:
             launcher.graph.stop_all(order=STOP_ORDER)
         for s, h in old.items():
             signal.signal(s, h)
-    if launcher.stop_signal is not None and args.duration > 0:
-        name = signal.Signals(launcher.stop_signal).name
-        launcher.outcome.add("interrupted", f"stopped by {name} before the end of the run")
-    for line in launcher.report():
-        print(line)
-    code = launcher.outcome.exit_code()
-    for cause, line in launcher.outcome.causes.items():
-        print(f"{prog}: {cause} (exit {EXIT_CODES[cause]}): {line}", file=sys.stderr)
-    print(f"bag: {launcher.bag}", flush=True)
-    launcher.cleanup()
-    return code
+        launcher.cleanup()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
