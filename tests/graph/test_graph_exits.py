@@ -128,8 +128,7 @@ def test_default_scenario_exits_0_with_both_controllers_segments(script):
 
 
 def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(script):
-    s = script("--duration", "4", "--no-switch", "--controller", "pd_pf",
-               "--set", "sim.lockstep_timeout=0.2")
+    s = script("--duration", "4", "--no-switch", "--controller", "pd_pf")
     s.wait_log("metrics", "cycle 0 [0, 1] s")
     os.kill(s.pids()["pd_pf_controller"], signal.SIGKILL)
     code = s.wait()
@@ -143,13 +142,13 @@ def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(s
 
 def assert_uncommanded_cycles_are_labelled(s: Script, controller: str) -> None:
     """Cycles with ticks the controller did not command carry another label, in
-    indices.json and in the printed table; clean cycles keep the controller's name."""
+    indices.json and in the printed table; clean cycles keep the controller's name. (Under
+    load the first ticks may go unanswered too: that cycle is then 'mixed', rightly.)"""
     doc = json.loads((s.bag / "indices.json").read_text())
     cycles = doc["cycles"]
     assert any(c["uncommanded_ticks"] > 0 for c in cycles), cycles
     for c in cycles:
         assert (c["label"] == controller) == (c["uncommanded_ticks"] == 0), c
-    assert cycles[0]["label"] == controller
     last = doc["segments"][-1]["last_full_cycle"]
     row = table_rows(s.stdout())[-1]
     assert row.split()[0] == last["label"], row
