@@ -21,6 +21,8 @@ from hexapod_metrics.graph_launcher import EXIT_CODES
 from .conftest import call, hexapod_cli, next_domain_id, ros_client
 
 ROOT = Path(__file__).resolve().parents[2]
+#: conftest.FAST_TIMING as run_graph.sh options (behaviour, not the paper's numbers)
+FAST = ("--set", "sim.dt=0.0001", "--control-rate", "1000")
 
 
 class Script:
@@ -36,7 +38,7 @@ class Script:
                "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         with self.out.open("w") as out, self.err.open("w") as err:
             self.proc = subprocess.Popen(
-                [str(ROOT / "scripts" / "run_graph.sh"), "--bag", str(self.bag), *args],
+                [str(ROOT / "scripts" / "run_graph.sh"), "--bag", str(self.bag), *FAST, *args],
                 stdout=out, stderr=err, env=env, start_new_session=True)
 
     def log(self, name: str) -> str:
