@@ -353,7 +353,7 @@ NODE_PARAMS: dict[str, tuple[str, ...]] = {
     "pd_pf_controller": ("autostart",),
     "metrics": ("bag_path", "batch_interval"),
     "markers": ("rate",),
-    "foxglove_bridge": ("host", "port"),
+    "foxglove_bridge": ("host", "port", "batch_interval"),
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)
 
