@@ -64,8 +64,9 @@ STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_c
 DISK_FULL_MARKERS = ("No space left on device", "ENOSPC", "disk full")
 #: Free bytes below which a failed recorder's disk counts as full.
 DISK_FULL_BYTES = 1 << 20
-#: Exit code with which the recorder reports a full disk (errno ENOSPC).
-RECORDER_DISK_FULL_EXIT = 28
+#: Exit code of a recorder whose bag could not be written to the end (disk full, quota, I/O
+#: error): metrics_node.EXIT_RECORDING_FAILED; its log line says which.
+RECORDER_WRITE_FAILED_EXIT = 3
 
 
 class LaunchError(HexapodError):
@@ -224,6 +225,10 @@ class Launcher:
         """The sim's own parameters: stop, scripted switch, summary file."""
         a = self.args
         extra = [f"summary_path:={self.summary_file}"]
+        if a.markers or a.foxglove is not None:
+            # tick 0 waits for the markers node too, so the markers cover the run from t = 0
+            extra.append("wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller,"
+                         "metrics,markers")
         switch_to = a.switch_to or ("pd_p" if a.controller == "pd_pf" else "pd_pf")
         if a.duration > 0:
             extra.append("stop_at_end:=true")
@@ -296,7 +301,9 @@ class Launcher:
                 self.outcome.add("disk full", f"the recorder ran out of disk space ({how}; "
                                  f"log: {log})")
             elif during_run or code != 0:
-                self.outcome.add("recorder failed", f"the recorder (metrics) {how} "
+                what = (" (its bag could not be written to the end)"
+                        if code == RECORDER_WRITE_FAILED_EXIT else "")
+                self.outcome.add("recorder failed", f"the recorder (metrics) {how}{what} "
                                  f"{'during the run' if during_run else 'at the end'} "
                                  f"(log: {log})")
         elif during_run or code not in (0, None):
@@ -308,9 +315,7 @@ class Launcher:
     def _disk_full(self, code: int | None) -> bool:
         """Did the recorder stop because the bag's disk is full?  Its exit code, the words
         of its log, or (a log on the same full disk may say nothing) the free space."""
-        if code == RECORDER_DISK_FULL_EXIT:
-            return True
-        if code == 0:
+        if code in (0, None):
             return False
         try:
             if shutil.disk_usage(self.bag.parent).free < DISK_FULL_BYTES:
