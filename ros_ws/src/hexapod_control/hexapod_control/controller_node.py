@@ -4,7 +4,8 @@ Lifecycle: *configure* reads the gains (``pd_p.*`` or ``pd_pf.*``; they may also
 while running), creates the command publisher and subscribes to the reference and the foot
 forces; *activate* enables the publisher and subscribes to the joint states (the last
 endpoint to appear, which tells the sim this controller is ready); *deactivate* stops
-answering; *cleanup* removes everything. With ``autostart`` (default true) the node
+answering and drops the joint-state subscription (so the graph shows that it cannot take
+over: the sim refuses a switch to it); *cleanup* removes everything. With ``autostart`` (default true) the node
 configures and activates itself at start, so no lifecycle manager is needed; the
 lifecycle services keep working (``hexapod switch`` uses them).
 
@@ -94,8 +95,8 @@ class ControllerNode(LifecycleNode):
     def _next_tick(self) -> int:
         """The first tick answered with a parameter changed now."""
         period_ns = T.stamp_ns(self.binding.params.sim.control_period)
-        if self.pending is not None:
-            return C.tick_of(self.pending, period_ns)
+        if self.pending:  # states waiting for their inputs: the oldest is answered next
+            return C.tick_of(min(self.pending), period_ns)
         return C.tick_of(self.last_state, period_ns) + 1 if self.last_state >= 0 else 0
 
     # ------------------------------------------------------------------ parameters
@@ -136,9 +137,12 @@ class ControllerNode(LifecycleNode):
         return ret
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop answering (the subscriptions stay, buffers keep filling)."""
+        """Stop answering; reference and forces keep filling their buffers."""
         self.active = False
         self.pending.clear()
+        sub = self.subs.pop(T.JOINT_STATES, None)
+        if sub is not None:
+            self.loop.unsubscribe(sub)
         self.log.info("inactive")
         return super().on_deactivate(state)
 

@@ -34,6 +34,7 @@ from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
+MAX_GAP = 10000  # ticks of missed clock messages filled in at most
 
 
 class TrajectoryNode(Node):
@@ -91,7 +92,10 @@ class TrajectoryNode(Node):
         if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
             self.log.info(f"clock went back to tick {k}: restarting the references")
             self.next_tick = k
-        for j in range(max(k, self.next_tick), k + self.lookahead + 1):
+        # From the first tick not yet published: a clock message lost from a full queue
+        # (the sim does not wait for the references while it holds or damps) leaves no gap.
+        start = self.next_tick if k - self.next_tick < MAX_GAP else k
+        for j in range(max(start, 0), k + self.lookahead + 1):
             c = self._reference_of(j)
             self.pub.publish(self.signer.sign(self.codec.encode(
                 T.stamp_ns(j * self.period), "", c.position, c.velocity, c.effort)))

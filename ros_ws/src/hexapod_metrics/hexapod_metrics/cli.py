@@ -17,6 +17,7 @@ import numpy as np
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import HexapodParams, load_params
 
+from .cli_args import OneLineParser, control_rate, param_value
 from .core.errors import BagError
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
@@ -27,11 +28,11 @@ COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_analysis")
 def params_arguments(parser: argparse.ArgumentParser) -> None:
     """The options every engine command shares: params file and the usual overrides."""
     parser.add_argument("--params", help="ROS 2 params file (default: the shipped base case)")
-    parser.add_argument("--t-max", type=float, dest="t_max",
+    parser.add_argument("--t-max", type=param_value("actuator.t_max"), dest="t_max",
                         help="actuator saturation T_max in N m ('inf' for ideal actuators)")
-    parser.add_argument("--ground-scale", type=float, dest="ground_scale",
+    parser.add_argument("--ground-scale", type=param_value("ground.scale"), dest="ground_scale",
                         help="factor on all four ground parameters (1.0 = 100 %%)")
-    parser.add_argument("--control-rate", type=float, dest="control_rate", metavar="HZ",
+    parser.add_argument("--control-rate", type=control_rate, dest="control_rate", metavar="HZ",
                         help="control rate in Hz: sim.control_period = 1/HZ, a whole number "
                         "of physics steps (10000 = control at every step)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -59,9 +60,12 @@ def params_from_args(args: argparse.Namespace) -> HexapodParams:
 
 
 def _parse_value(text: str) -> Any:
-    import yaml
+    from hexapod_sim.core.params import parse_yaml
 
-    return yaml.safe_load(text)
+    try:
+        return parse_yaml(text)
+    except Exception:  # noqa: BLE001 (any YAML error: then it is text)
+        return text
 
 
 def _fmt(v: float) -> str:
@@ -79,9 +83,16 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     switches = []
     for item in args.switch:
         when, sep, who = item.partition(":")
-        if not sep:
-            raise HexapodError(f"--switch expects TIME:CONTROLLER, got {item!r}")
-        switches.append((float(when), who))
+        try:
+            t_switch = float(when)
+        except ValueError:
+            t_switch = float("nan")
+        if not sep or not (0.0 <= t_switch <= (args.duration or p.run.duration)):
+            raise HexapodError(f"--switch expects TIME:CONTROLLER with TIME in [0, duration = "
+                               f"{args.duration or p.run.duration:g}] s, got {item!r}")
+        if who not in ("pd_p", "pd_pf"):
+            raise HexapodError(f"--switch {item!r}: CONTROLLER must be pd_p or pd_pf")
+        switches.append((t_switch, who))
     changes = []
     for item in args.change:
         when, sep, assignment = item.partition(":")
@@ -122,13 +133,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser."""
-    parser = argparse.ArgumentParser(prog="hexapod", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="hexapod", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("simulate", help="run the in-process engine (no ROS) and print indices")
     params_arguments(sp)
     sp.add_argument("--controller", choices=["pd_p", "pd_pf", "both"],
                     help="controller (default: run.controller of the params file)")
-    sp.add_argument("--duration", type=float, help="simulated seconds (default run.duration)")
+    sp.add_argument("--duration", type=param_value("run.duration"),
+                    help="simulated seconds (default run.duration)")
     sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
     sp.add_argument("--bag", help="also write the run as a rosbag2/MCAP bag to this directory")
     sp.add_argument("--switch", action="append", default=[], metavar="TIME:CONTROLLER",

@@ -11,7 +11,10 @@ from typing import Callable
 
 import numpy as np
 
+from hexapod_sim.core.errors import HexapodError
+
 from .cli import params_arguments, params_from_args
+from .cli_args import parse_range
 from .core.indices import INDEX_NAMES
 
 
@@ -54,17 +57,13 @@ def _backend(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return backend
 
 
-def _floats(text: str) -> list[float]:
-    """'10:1000:21' (log-spaced), 'a:b:n:lin', or a comma list."""
-    if ":" in text:
-        parts = text.split(":")
-        lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
-        if len(parts) > 3 and parts[3] == "lin":
-            return [float(v) for v in np.linspace(lo, hi, n)]
-        if lo <= 0 or hi <= 0:
-            raise ValueError(f"log-spaced range {text!r} needs positive ends (or add ':lin')")
-        return [float(v) for v in np.geomspace(lo, hi, n)]
-    return [float(v) for v in text.split(",") if v.strip()]
+def _floats(text: str, option: str = "") -> list[float]:
+    """'10:1000:21' (log-spaced), 'a:b:n:lin', or a comma list (cli_args.parse_range); a bad
+    one raises HexapodError naming ``option``."""
+    try:
+        return parse_range(text)
+    except ValueError as err:
+        raise HexapodError(f"argument {option}: {err}" if option else str(err)) from None
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -73,6 +72,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
     if args.range is None:
         args.range = "10:1000:21" if args.kind == "ground" else "100:400:13:lin"
+    _floats(args.range, "--range")
+    _floats(args.t_max_list, "--t-max-list")
+    for c in args.controllers.split(","):
+        if c not in ("pd_p", "pd_pf"):
+            raise HexapodError(f"argument --controllers: {c!r} is not pd_p or pd_pf")
     p = params_from_args(args)
     backend = _backend(args)
     prog = progress_factory(not args.no_progress)
@@ -156,10 +160,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     from .core.experiments import default_grid, tune
 
     p = params_from_args(args)
-    grid = default_grid(p, args.controller, _floats(args.factors))
+    grid = default_grid(p, args.controller, _floats(args.factors, "--factors"))
     for item in args.grid:
         name, _, values = item.partition("=")
-        grid[name.strip()] = _floats(values)
+        grid[name.strip()] = _floats(values, "--grid")
     total = int(np.prod([len(v) for v in grid.values()])) + 1
     res = tune(p, args.controller, grid, backend=_backend(args),
                progress=progress_factory(not args.no_progress)(f"tuning {args.controller}", total))

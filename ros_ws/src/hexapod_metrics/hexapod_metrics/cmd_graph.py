@@ -10,7 +10,10 @@
 
 :class:`GraphProcesses` starts node processes (``python -c 'from <module> import main'``
 with ``--ros-args``), keeps their logs, and stops them (SIGINT, then SIGTERM, then
-SIGKILL); the benchmark and soak scripts and the graph tests use it.
+SIGKILL); the graph launcher (graph_launcher.py, ``scripts/run_graph.sh``), the benchmark
+and soak scripts and the graph tests use it. Every node it starts dies with it
+(``PR_SET_PDEATHSIG``, lifeline.py), and with localhost-only discovery the nodes read a Fast
+DDS profile written privately for this graph (dds_profile.py), never a shared file.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import weakref
 from pathlib import Path
@@ -28,6 +32,10 @@ from typing import IO, Any, Callable, Sequence
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file
 from hexapod_sim.core.params import CONTROLLERS
+from hexapod_sim.dds_profile import private_profile
+from hexapod_sim.lifeline import PARENT_ENV
+
+from .cli_args import number
 
 #: node name -> (module, entry point)
 NODES: dict[str, tuple[str, str]] = {
@@ -47,6 +55,10 @@ NICE = {"metrics": 10, "foxglove_bridge": 10}
 #: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is
 #: off by default.
 SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
+
+
+#: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
+TIMEOUT = number(0.0, 3600.0, "a timeout (s)", lo_open=True)
 
 
 class GraphError(HexapodError):
@@ -82,6 +94,13 @@ class GraphProcesses:
             key = new_key_file()
             self.env[KEY_ENV] = str(key)
             weakref.finalize(self, shutil.rmtree, key.parent, True)
+        self.env[PARENT_ENV] = str(os.getpid())
+        self._private: Path | None = None
+        if (self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+                and "FASTRTPS_DEFAULT_PROFILES_FILE" not in self.env):
+            self._private = Path(tempfile.mkdtemp(prefix="hexapod_graph_"))
+            self.env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(self._private))
+            weakref.finalize(self, shutil.rmtree, self._private, True)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
 
@@ -95,7 +114,9 @@ class GraphProcesses:
         nice = NICE.get(node, 0) if nice is None else nice
         args = list(prefix) + (["nice", "-n", str(nice)] if nice else [])
         args += [sys.executable, "-c",
-                f"import sys; from {module} import {func}; sys.exit({func}())", "--ros-args"]
+                 "import sys; from hexapod_sim.lifeline import die_with_parent; "
+                 f"die_with_parent(); from {module} import {func}; sys.exit({func}())",
+                 "--ros-args"]
         if self.params:
             args += ["--params-file", str(self.params)]
         if self.use_sim_time and node in SIM_TIME_NODES:
@@ -175,6 +196,9 @@ class GraphProcesses:
         for name in list(order) + [n for n in self.procs if n not in order]:
             if name in self.procs:
                 codes[name] = self.stop(name)
+        if self._private is not None:
+            shutil.rmtree(self._private, ignore_errors=True)
+            self._private = None
         return codes
 
 
@@ -265,8 +289,14 @@ def switch(controller: str, timeout: float = 10.0) -> str:
         before = ensure_active(node, controller, timeout)
         value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=controller)
         req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
-        result = _call(node, SetParameters, "/hexapod_sim/set_parameters", req, timeout,
-                       missing).results[0]
+        end = time.monotonic() + timeout
+        while True:  # a just-activated controller takes a moment to show in the sim's graph
+            result = _call(node, SetParameters, "/hexapod_sim/set_parameters", req, timeout,
+                           missing).results[0]
+            if result.successful or " refused: " not in result.reason \
+                    or time.monotonic() > end:
+                break
+            time.sleep(0.05)
         if not result.successful:
             raise GraphError(f"hexapod_sim refused run.controller = {controller}: "
                              f"{result.reason}")
@@ -339,11 +369,11 @@ def add_parser(subparsers: Any) -> None:
     """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
     sp = subparsers.add_parser("switch", help="hand control to another controller node")
     sp.add_argument("controller", choices=CONTROLLERS)
-    sp.add_argument("--timeout", type=float, default=10.0,
+    sp.add_argument("--timeout", type=TIMEOUT, default=10.0,
                     help="seconds to wait for the sim and the controller (default 10)")
     sp.set_defaults(func=_cmd_switch)
     st = subparsers.add_parser("status", help="what runs in the graph, mode, ticks")
-    st.add_argument("--timeout", type=float, default=5.0,
+    st.add_argument("--timeout", type=TIMEOUT, default=5.0,
                     help="seconds to wait for /hexapod/status (default 5)")
     st.add_argument("--json", action="store_true", help="print JSON")
     st.set_defaults(func=_cmd_status)

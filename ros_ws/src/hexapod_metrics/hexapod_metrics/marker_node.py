@@ -30,7 +30,7 @@ from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.hot_loop import HotLoop, install_stop_signals
 from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.ros_params import declare_params
+from hexapod_sim.ros_params import declare_node_param, declare_params
 
 from .core.figure import FORCE_SCALE, side, stick_figure
 
@@ -96,7 +96,7 @@ class MarkerNode(Node):
     def __init__(self) -> None:
         super().__init__("markers")
         p = declare_params(self)  # the shared params file (--ros-args --params-file)
-        rate = float(self.declare_parameter("rate", 30.0).value)
+        rate = declare_node_param(self, "rate", 30.0, "markers per simulated second (Hz)")
         self.l1 = p.robot.leg_length_1
         self.period_ns = int(round(p.sim.control_period * 1e9))
         self.stride = max(1, int(round(1.0 / (rate * p.sim.control_period))))

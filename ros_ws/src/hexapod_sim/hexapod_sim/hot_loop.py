@@ -36,11 +36,9 @@ lost samples (:data:`FASTDDS_PROFILE`).
 from __future__ import annotations
 
 import gc
-import hashlib
 import os
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -52,6 +50,8 @@ from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
+
+from .dds_profile import FASTDDS_PROFILE, private_profile
 
 RawCallback = Callable[[bytes], None]
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
@@ -293,71 +293,20 @@ class FastLogger:
         self._log(LoggingSeverity.ERROR, message)
 
 
-#: Fast DDS profile of the graph's processes (used when discovery is localhost-only and no
-#: profile is set): a larger shared-memory segment and port queue (the defaults, 0.5 MB and
-#: 512 messages per process, fill up when one process stalls for ~0.1 s at 1 kHz, and the
-#: lost samples then wait for the next heartbeat: up to 3 s, which stalled the loop for
-#: 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer NACKs at
-#: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
-#: loopback interface.
-FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
-<dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <profiles>
-    <transport_descriptors>
-      <transport_descriptor>
-        <transport_id>hexapod_shm</transport_id>
-        <type>SHM</type>
-        <segment_size>8388608</segment_size>
-        <port_queue_capacity>4096</port_queue_capacity>
-      </transport_descriptor>
-      <transport_descriptor>
-        <transport_id>hexapod_udp</transport_id>
-        <type>UDPv4</type>
-        <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
-      </transport_descriptor>
-    </transport_descriptors>
-    <participant profile_name="hexapod_participant" is_default_profile="true">
-      <rtps>
-        <userTransports>
-          <transport_id>hexapod_shm</transport_id>
-          <transport_id>hexapod_udp</transport_id>
-        </userTransports>
-        <useBuiltinTransports>false</useBuiltinTransports>
-      </rtps>
-    </participant>
-    <data_writer profile_name="hexapod_writer" is_default_profile="true">
-      <times>
-        <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
-        <nackResponseDelay><sec>0</sec><nanosec>0</nanosec></nackResponseDelay>
-      </times>
-    </data_writer>
-    <data_reader profile_name="hexapod_reader" is_default_profile="true">
-      <times>
-        <heartbeatResponseDelay><sec>0</sec><nanosec>0</nanosec></heartbeatResponseDelay>
-      </times>
-    </data_reader>
-  </profiles>
-</dds>
-"""
-
-
 def configure_middleware() -> None:
     """DDS settings of the graph's processes; call before ``rclpy.init``.
 
     Publication is synchronous and, with localhost-only discovery (the project's default),
-    the Fast DDS profile :data:`FASTDDS_PROFILE` applies; the environment overrides both
-    (``RMW_FASTRTPS_PUBLICATION_MODE``, ``FASTRTPS_DEFAULT_PROFILES_FILE``).
+    the Fast DDS profile :data:`FASTDDS_PROFILE` applies, written to a private file of this
+    process (never read from a shared, predictable path: see dds_profile.py); the
+    environment overrides both (``RMW_FASTRTPS_PUBLICATION_MODE``,
+    ``FASTRTPS_DEFAULT_PROFILES_FILE``, which the graph launcher sets to its own private
+    copy).
     """
     os.environ.setdefault("RMW_FASTRTPS_PUBLICATION_MODE", "SYNCHRONOUS")
     if (os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") == "LOCALHOST"
             and "FASTRTPS_DEFAULT_PROFILES_FILE" not in os.environ):
-        digest = hashlib.sha256(FASTDDS_PROFILE.encode()).hexdigest()[:12]
-        path = Path(tempfile.gettempdir()) / f"hexapod_fastdds_{digest}.xml"
-        if not path.exists():
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(FASTDDS_PROFILE)
-            os.replace(tmp, path)
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(path)
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(remove_at_exit=True))
 
 
 def init_rclpy(args: list[str] | None, node_name: str) -> bool:
@@ -398,5 +347,5 @@ def install_stop_signals(loop: HotLoop, on_stop: Callable[[int], None] | None = 
     signal.signal(signal.SIGTERM, handler)
 
 
-__all__ = ["FastLogger", "HotLoop", "configure_middleware", "init_rclpy",
+__all__ = ["FASTDDS_PROFILE", "FastLogger", "HotLoop", "configure_middleware", "init_rclpy",
            "install_stop_signals"]

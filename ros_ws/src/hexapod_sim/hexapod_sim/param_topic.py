@@ -38,6 +38,12 @@ class ParamAnnouncer:
                                          C.TOPIC_QOS[T.PARAMETERS].publisher())
         node.add_post_set_parameters_callback(self._changed)
         values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
+        # Each node declares only the model parameters it uses (ros_params.USES); the start
+        # record also carries the rest of the model parameters it runs with (read from the
+        # params file), so any one node's record gives the run's full parameters.
+        binding = getattr(node, "binding", None)
+        if binding is not None:
+            values = {**binding.params.to_flat(), **values}
         self.publish("start", 0, values)
 
     def _changed(self, params: list[Parameter]) -> None:

@@ -1,7 +1,10 @@
 """The model's parameters as ROS parameters: declare, validate, apply.
 
-Every node declares every parameter of :data:`~hexapod_sim.core.params.SPECS` (one
-params file configures the whole graph: ``--ros-args --params-file``), with a
+One params file configures the whole graph (``--ros-args --params-file``), but each node
+declares only the parameters of :data:`~hexapod_sim.core.params.SPECS` that it uses
+(:data:`USES`), so that a parameter set on a node that does not use it is refused
+("parameter not declared") instead of accepted and ignored; the node still reads the
+others from the file (validated, not exposed). Each is declared with a
 descriptor built from the same table: description with units and allowed values,
 ``FloatingPointRange``/``IntegerRange`` where both bounds are finite, and ``read_only``
 for everything that cannot change while the model runs. Only these change live:
@@ -38,11 +41,57 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .core.errors import ParameterError
-from .core.params import SPECS, HexapodParams, Spec, check_value, from_flat, load_params
+from .core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams, Spec,
+                          check_value, from_flat, load_params, nearest, unknown_parameter)
 
 #: Parameters (or groups, with a trailing '.') that may change while the graph runs.
 LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
         "sim.hold_time", "sim.fallback_damping")
+
+
+#: Model parameters (or groups, with a trailing '.') each node uses and so declares.
+USES: dict[str, tuple[str, ...]] = {
+    "hexapod_sim": ("robot.", "body.", "ground.", "gait.", "actuator.", "sim.",
+                    "run.controller", "run.duration"),
+    "trajectory_generator": ("robot.", "gait.", "sim.dt", "sim.control_period"),
+    "pd_p_controller": ("robot.leg_length_1", "robot.leg_length_2", "pd_p."),
+    "pd_pf_controller": ("robot.leg_length_1", "robot.leg_length_2", "pd_pf."),
+    "metrics": ("gait.", "sim.dt", "sim.control_period", "run.eval_cycles"),
+    "markers": ("robot.", "sim.control_period"),
+}
+#: Parameters rcl or rclpy declare themselves, or that a params file may carry for them.
+ROS_OWN = ("use_sim_time", "start_type_description_service")
+
+
+def _matches(name: str, patterns: tuple[str, ...]) -> bool:
+    return any(name == p or (p.endswith(".") and name.startswith(p)) for p in patterns)
+
+
+def used_by(node_name: str) -> list[str]:
+    """The model parameters node ``node_name`` declares (all of them for an unknown node)."""
+    patterns = USES.get(node_name)
+    return [n for n in SPECS if patterns is None or _matches(n, patterns)]
+
+
+def check_overrides(values: dict[str, Any]) -> None:
+    """Raise ParameterError for an override (params file, ``-p``) that no node knows:
+    an unknown model parameter or group, or an unknown node parameter (nearest name)."""
+    groups = {n.split(".")[0] for n in SPECS}
+    own = {n for names_ in NODE_PARAMS.values() for n in names_} | set(COMMON_NODE_PARAMS)
+    for name, value in values.items():
+        head, dot, _ = name.partition(".")
+        if name in SPECS or name in own or name in ROS_OWN or head == "qos_overrides":
+            continue
+        if head in groups or not dot:
+            if not dot and head in groups:
+                raise ParameterError(name, value, f"a group of parameters ({name}.<name>: "
+                                     f"value), not a value")
+            if not dot:
+                raise ParameterError(name, value, "a known parameter name"
+                                     + nearest(name, sorted(own) + sorted(SPECS)))
+            raise unknown_parameter(name, value)
+        raise ParameterError(name, value, f"a known group (unknown group '{head}'"
+                             + nearest(head, sorted(groups)) + ")")
 
 
 def is_live(name: str) -> bool:
@@ -73,14 +122,23 @@ def _override(node: Node, name: str) -> Any:
 
 
 def declare_params(node: Node, defaults: HexapodParams | None = None) -> HexapodParams:
-    """Declare every model parameter on ``node``; return the validated parameters.
+    """Declare the model parameters ``node`` uses (:data:`USES`); return all, validated.
 
     Values come from the node's overrides (params file, ``-p``), else from ``defaults``
-    (default: the shipped base experiment). Raises ParameterError naming the first bad one.
+    (default: the shipped base experiment); the parameters the node does not use are read
+    from the overrides too (validated, not declared). Raises ParameterError naming the
+    first bad value, or an override that no node knows (nearest known name).
     """
     base = (defaults or load_params()).to_flat()
+    overrides = getattr(node, "_parameter_overrides", {})
+    check_overrides({n: o.value for n, o in overrides.items()})
+    declared = set(used_by(node.get_name()))
     flat: dict[str, Any] = {}
     for name, spec in SPECS.items():
+        if name not in declared:
+            flat[name] = check_value(name, overrides[name].value) if name in overrides \
+                else base[name]
+            continue
         try:
             value = node.declare_parameter(name, base[name], descriptor(name, spec)).value
         except (InvalidParameterTypeException, InvalidParameterValueException,
@@ -90,11 +148,6 @@ def declare_params(node: Node, defaults: HexapodParams | None = None) -> Hexapod
             check_value(name, bad)
             raise ParameterError(name, bad, f"{spec.allowed()} ({err})") from err
         flat[name] = check_value(name, value)
-    unknown = [n for n in getattr(node, "_parameter_overrides", {})
-               if "." in n and n.split(".")[0] in {k.split(".")[0] for k in SPECS}
-               and n not in SPECS]
-    for name in unknown:
-        node.get_logger().warning(f"params file: unknown parameter '{name}' ignored")
     return from_flat(flat)
 
 
@@ -102,11 +155,13 @@ def declare_node_param(node: Node, name: str, default: Any, description: str) ->
     """Declare a node's own (non-model) parameter; the value converted to the default's type.
 
     Declared with dynamic typing so that ``3`` is accepted where ``3.0`` is meant; a value
-    that cannot be converted raises ParameterError.
+    that cannot be converted raises ParameterError. Read-only: the nodes read these once at
+    start, so a runtime change is refused ("read-only") rather than accepted and ignored.
     """
     kind = type(default)
     value = node.declare_parameter(name, default, ParameterDescriptor(
-        name=name, description=description, dynamic_typing=True)).value
+        name=name, description=f"{description} (read at start: read-only)",
+        dynamic_typing=True, read_only=True)).value
     if kind is bool:
         if not isinstance(value, bool):
             raise ParameterError(name, value, "true or false")
@@ -122,17 +177,21 @@ def declare_node_param(node: Node, name: str, default: Any, description: str) ->
 class ParamBinding:
     """Keeps a node's :class:`HexapodParams` in sync with its ROS parameters.
 
-    ``on_change(params, changed_names)`` runs after an accepted change (post-set callback).
+    ``on_change(params, changed_names)`` runs after an accepted change (post-set callback);
+    ``check(changes)``, if given, may refuse a change that is valid in itself but cannot be
+    honoured now (returns the reason, or None).
     """
 
     def __init__(self, node: Node, params: HexapodParams,
-                 on_change: Callable[[HexapodParams, set[str]], None] | None = None) -> None:
+                 on_change: Callable[[HexapodParams, set[str]], None] | None = None,
+                 check: Callable[[list[Parameter]], str | None] | None = None) -> None:
         from .hot_loop import FastLogger
 
         self.node = node
         self.log = FastLogger(node.get_logger().name)
         self.params = params
         self._on_change = on_change
+        self._check = check
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
@@ -164,6 +223,10 @@ class ParamBinding:
         except ParameterError as err:
             self.log.warning(f"rejected: {err}")
             return SetParametersResult(successful=False, reason=str(err))
+        reason = self._check(changes) if self._check is not None else None
+        if reason:
+            self.log.warning(f"rejected: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _apply(self, changes: list[Parameter]) -> None:
@@ -178,5 +241,5 @@ class ParamBinding:
             self._on_change(self.params, names)
 
 
-__all__ = ["LIVE", "ParamBinding", "declare_node_param", "declare_params", "descriptor",
-           "is_live"]
+__all__ = ["LIVE", "ROS_OWN", "USES", "ParamBinding", "check_overrides", "declare_node_param",
+           "declare_params", "descriptor", "is_live", "used_by"]

@@ -42,6 +42,15 @@ fallback on/off, switches, real-time factor, and the round trip state -> command
 
 A switch can also be scripted: parameters ``switch_at`` (simulated s) and ``switch_to``
 make the sim set its own ``run.controller`` at that tick (scripts/run_graph.sh uses it).
+Every change of ``run.controller`` (a scripted switch, ``hexapod switch``, any parameter
+client) goes through the same check: the target controller node must be in the graph,
+active (subscribed to the joint states: an inactive controller is not) and matched with
+the sim, else the change is refused with that reason.
+
+``summary_path`` (read-only, '' = none): at exit the sim writes its summary there as JSON
+(ticks, missed / late ticks, fallback episodes, switches, and the tick ranges whose
+torque was not a command of the controller in charge: held or damping fallback), for the
+launcher's exit code and labels.
 
 Start: tick 0 is published once the nodes named in ``wait_for`` show their endpoints in
 the graph and the sim's publishers and subscription are matched with them (at most
@@ -108,7 +117,8 @@ class SimNode(Node):
         super().__init__("hexapod_sim")
         self.log = FastLogger(self.get_logger().name)
         self.guard = InputGuard(self, self.log)  # authenticates and checks every input
-        self.binding = ParamBinding(self, declare_params(self), self._on_params)
+        self.binding = ParamBinding(self, declare_params(self), self._on_params,
+                                    check=self._check_change)
         self.stop_at_end = declare_node_param(
             self, "stop_at_end", False, "stop (and exit) after the tick at run.duration")
         wait_for = declare_node_param(
@@ -126,6 +136,12 @@ class SimNode(Node):
                                             "controller of the scripted switch ('' = none)")
         if self.switch_to:
             check_controller(self.switch_to)
+        end = self.params.run.duration if self.stop_at_end else float("inf")
+        if self.switch_to and not (0.0 <= self.switch_at <= end):
+            raise ParameterError("switch_at", self.switch_at,
+                                 f"a time in [0, run.duration = {end:g}] s")
+        self.summary_path = declare_node_param(
+            self, "summary_path", "", "write the end summary as JSON to this file ('' = no)")
         p = self.params
         self.mode = p.sim.mode
         self.period = p.sim.control_period
@@ -191,6 +207,10 @@ class SimNode(Node):
         self.latency = np.zeros(LATENCY_BINS, dtype=np.int64)
         # Start values now; changes at the tick boundary that applies them (_step).
         self.announcer = ParamAnnouncer(self, self.period, deferred=True)
+        # Tick ranges [a, b) whose torque was not the command of the controller in charge.
+        self.not_commanded: list[list[int]] = []
+        self.fallback_ranges: list[list[int]] = []
+        self.switch_log: list[dict[str, object]] = []
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -205,6 +225,41 @@ class SimNode(Node):
         out = np.empty((N_LEGS, 2))
         saturate(np.zeros((N_LEGS, 2)), 1.0, out)
         probe.advance_tick(out)
+
+    def _check_change(self, changes: list[Parameter]) -> str | None:
+        """Refuse a ``run.controller`` change to a controller that cannot take over now."""
+        for p in changes:
+            if p.name == "run.controller" and isinstance(p.value, str) and \
+                    p.value in ("pd_p", "pd_pf") and p.value != self.in_charge:
+                why = self.controller_unready(p.value)
+                if why:
+                    return f"run.controller = {p.value!r} refused: {why}"
+        return None
+
+    def controller_unready(self, controller: str) -> str:
+        """Why ``controller`` cannot take over at the next tick ('' if it can)."""
+        node = f"{controller}_controller"
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        if node not in self.get_node_names():
+            return f"{node} is not running on ROS_DOMAIN_ID={domain}"
+        if not any(i.node_name == node for i in
+                   self.get_subscriptions_info_by_topic(T.JOINT_STATES)):
+            return (f"{node} is not active (no subscription to {T.JOINT_STATES}): activate "
+                    f"it first (hexapod switch {controller} does)")
+        if not any(i.node_name == node for i in
+                   self.get_publishers_info_by_topic(T.JOINT_COMMANDS)):
+            return f"{node} does not publish {T.JOINT_COMMANDS}"
+        if (self.pub[T.JOINT_STATES].get_subscription_count()
+                < self.count_subscribers(T.JOINT_STATES)):
+            return f"{node}'s subscription to {T.JOINT_STATES} is not matched yet: try again"
+        return ""
+
+    def _mark(self, ranges: list[list[int]], k: int) -> None:
+        """Add tick ``k`` to a list of [a, b) ranges (merged; at most 10000 kept)."""
+        if ranges and ranges[-1][1] == k:
+            ranges[-1][1] = k + 1
+        elif len(ranges) < 10000:
+            ranges.append([k, k + 1])
 
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
         if "run.controller" in names and p.run.controller != self.in_charge:
@@ -442,6 +497,10 @@ class SimNode(Node):
         """Apply a command (None: hold the torque, or damp in fallback), integrate one period,
         apply what changes at the tick boundary, prepare the next tick's messages."""
         P = self.physics.P
+        if demand is None and self.started:
+            self._mark(self.not_commanded, self.physics.tick)
+            if self.fallback:
+                self._mark(self.fallback_ranges, self.physics.tick)
         if demand is not None:
             saturate(demand, P[P_TMAX], self.torque)
         elif self.fallback:
@@ -469,6 +528,7 @@ class SimNode(Node):
             k = self.physics.tick
             self.log.info(f"switched {old} -> {self.in_charge} at tick {k} "
                           f"(t = {k * self.period:.3f} s)")
+            self.switch_log.append({"tick": k, "from": old, "to": self.in_charge})
             self._announce()
         self.announcer.flush(self.physics.tick)
         self._prepare()
@@ -598,6 +658,29 @@ class SimNode(Node):
                 f"{self.foreign} commands from a controller not in charge; inputs: "
                 f"{self.guard.summary()}")
 
+    def summary_doc(self) -> dict[str, object]:
+        """The end summary as a JSON-able dict (``summary_path``)."""
+        k = self.physics.tick
+        return {"tick": k, "end_tick": self.end_tick, "control_period": self.period,
+                "mode": self.mode, "started": self.started, "finished": self.finished,
+                "controller": self.in_charge, "missed": self.missed, "late": self.late,
+                "on_time": self.on_time, "foreign": self.foreign,
+                "fallback_episodes": self.fallback_episodes, "switches": self.switch_log,
+                "missed_after_switch": self.missed_after_switch,
+                "not_commanded_ticks": self.not_commanded,
+                "fallback_ticks": self.fallback_ranges}
+
+    def write_summary(self) -> None:
+        """Write :meth:`summary_doc` to ``summary_path`` (atomically), if set."""
+        if not self.summary_path:
+            return
+        import json
+
+        tmp = f"{self.summary_path}.tmp"
+        with open(tmp, "w") as f:
+            json.dump(self.summary_doc(), f)
+        os.replace(tmp, self.summary_path)
+
     def flush(self, timeout: float = 2.0) -> None:
         """Wait (at most ``timeout`` s in all) until subscribers acknowledged every message."""
         end = time.monotonic() + timeout
@@ -634,6 +717,10 @@ def main(args: list[str] | None = None) -> int:
             if node.started:
                 node.log.info(node.summary())
                 node._publish_status()
+            try:
+                node.write_summary()
+            except OSError as err:
+                node.log.error(f"cannot write the summary to {node.summary_path}: {err}")
             node.flush()
             if node.channel is not None:
                 node.channel.close()

@@ -102,6 +102,34 @@ def tick_count(p: HexapodParams, duration: float) -> int:
     return int(round(n))
 
 
+#: Bytes one in-process run holds per control tick: samples, commands, the reference and
+#: its temporaries (measured order of magnitude, rounded up).
+BYTES_PER_TICK = 4096
+
+
+def max_in_memory_ticks() -> int:
+    """Ticks one in-process run may hold: half of this machine's physical memory."""
+    import os
+
+    try:
+        mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        mem = 8 << 30
+    return int(mem // 2 // BYTES_PER_TICK)
+
+
+def check_fits_in_memory(p: HexapodParams, duration: float, n: int) -> None:
+    """Raise ParameterError (run.duration) if a run of ``n`` ticks cannot be held in memory."""
+    limit = max_in_memory_ticks()
+    if n > limit:
+        raise ParameterError("run.duration", duration,
+                             f"at most {limit * p.sim.control_period:g} s in one in-process run "
+                             f"at this control rate: it keeps every tick in memory (~"
+                             f"{BYTES_PER_TICK // 1024} kB each, half of this machine's "
+                             f"memory); the node graph (scripts/run_graph.sh) streams longer "
+                             f"runs")
+
+
 def run(p: HexapodParams, controller: str | None = None, duration: float | None = None,
         progress: Callable[[int, int], None] | None = None,
         switches: Sequence[tuple[float, str]] = (),
@@ -117,7 +145,9 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     ``progress(done, total)`` is called after every block of ticks.
     """
     controller = controller or p.run.controller
-    n = tick_count(p, p.run.duration if duration is None else duration)
+    duration = p.run.duration if duration is None else duration
+    n = tick_count(p, duration)
+    check_fits_in_memory(p, duration, n)
     schedule = [(0, controller)] + sorted(
         (int(math.ceil(ts / p.sim.control_period - 1e-9)), c) for ts, c in switches)
     for _, c in schedule:

@@ -10,8 +10,11 @@ Units are SI throughout (m, kg, s, N, N·m). Defaults are the paper's base exper
 """
 from __future__ import annotations
 
+import difflib
 import math
-from dataclasses import dataclass, field, fields
+import re
+from dataclasses import dataclass, field, fields, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -205,7 +208,7 @@ class HexapodParams:
         flat = self.to_flat()
         for name, value in dotted.items():
             if name not in flat:
-                raise ParameterError(name, value, "a known parameter name")
+                raise unknown_parameter(name, value)
             flat[name] = value
         return from_flat(flat)
 
@@ -231,7 +234,7 @@ def check_value(name: str, value: Any) -> Any:
     """Check one parameter against its spec; return it converted (int -> float where due)."""
     spec = SPECS.get(name)
     if spec is None:
-        raise ParameterError(name, value, "a known parameter name (see the params file)")
+        raise unknown_parameter(name, value)
     if spec.kind is str:
         if not isinstance(value, str) or value not in spec.choices:
             raise ParameterError(name, value, spec.allowed())
@@ -274,14 +277,49 @@ def validate(p: HexapodParams) -> HexapodParams:
     r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
     r_max = p.robot.leg_length_1 + p.robot.leg_length_2
     if hi >= r_max:
-        raise ParameterError("gait.body_height", p.gait.body_height,
+        name = _reach_culprit(p, ("gait.body_height", "gait.step_length"), too_far=True)
+        raise ParameterError(name, p.to_flat()[name],
                              f"a gait whose hip-foot distance stays below L1+L2 = {r_max:g} m "
-                             f"(this one reaches {hi:.4g} m: unreachable gait)")
+                             f"(this one reaches {hi:.4g} m with {_gait_text(p)}: "
+                             f"unreachable gait)")
     if lo <= r_min:
-        raise ParameterError("gait.body_height", p.gait.body_height,
+        name = _reach_culprit(p, ("gait.body_height", "gait.foot_clearance"), too_far=False)
+        raise ParameterError(name, p.to_flat()[name],
                              f"a gait whose hip-foot distance stays above |L1-L2| = {r_min:g} m "
-                             f"(this one comes to {lo:.4g} m: unreachable gait)")
+                             f"(this one comes to {lo:.4g} m with {_gait_text(p)}: "
+                             f"unreachable gait)")
     return p
+
+
+def _gait_text(p: HexapodParams) -> str:
+    g = p.gait
+    return (f"body_height {g.body_height:g} m, step_length {g.step_length:g} m, "
+            f"foot_clearance {g.foot_clearance:g} m")
+
+
+@lru_cache(maxsize=1)
+def _base_flat() -> dict[str, Any]:
+    return {k: v for k, v in read_params_file(default_params_path()).items() if k in SPECS}
+
+
+def _reach_culprit(p: HexapodParams, candidates: tuple[str, ...], too_far: bool) -> str:
+    """The parameter at fault for an unreachable gait: the first of ``candidates`` that
+    differs from the shipped base case and, put back to its base value, makes the gait
+    reach (else the first that differs, else the first candidate)."""
+    from .gait import reach_bounds
+
+    flat = p.to_flat()
+    base = _base_flat()
+    changed = [n for n in candidates if flat[n] != base.get(n, flat[n])]
+    r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
+    r_max = p.robot.leg_length_1 + p.robot.leg_length_2
+    for name in changed:
+        group, _, key = name.partition(".")
+        trial = replace(p, **{group: replace(getattr(p, group), **{key: base[name]})})
+        lo, hi = reach_bounds(trial)
+        if (hi < r_max) if too_far else (lo > r_min):
+            return name
+    return changed[0] if changed else candidates[0]
 
 
 def from_flat(flat: Mapping[str, Any]) -> HexapodParams:
@@ -305,31 +343,134 @@ def default_params_path() -> Path:
     return Path(__file__).resolve().parent.parent / "config" / "hexapod.yaml"
 
 
-def _flatten(prefix: str, tree: Mapping[str, Any], out: dict[str, Any]) -> None:
+#: Parameters of the nodes themselves (not of the model), by node: a params file may set
+#: them in the node's own section or in '/**'. ``use_sim_time`` is every node's.
+NODE_PARAMS: dict[str, tuple[str, ...]] = {
+    "hexapod_sim": ("stop_at_end", "wait_for", "startup_timeout", "switch_at", "switch_to",
+                    "summary_path"),
+    "trajectory_generator": ("lookahead",),
+    "pd_p_controller": ("autostart",),
+    "pd_pf_controller": ("autostart",),
+    "metrics": ("bag_path", "batch_interval"),
+    "markers": ("rate",),
+    "foxglove_bridge": ("host", "port", "batch_interval"),
+}
+COMMON_NODE_PARAMS = ("use_sim_time",)
+
+
+class YamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2 floats, as rcl's parser reads them: ``1e6``,
+    ``1E-3``, ``.inf``, ``-.inf``, ``.nan`` are floats (PyYAML's YAML 1.1 reads ``1e6``
+    as a string)."""
+
+
+YamlLoader.yaml_implicit_resolvers = {
+    k: [r for r in v if r[0] != "tag:yaml.org,2002:float"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                 |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                 |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                 |[-+]?\.(?:inf|Inf|INF)
+                 |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def parse_yaml(text: str) -> Any:
+    """Parse YAML text the one way the project does (params files, ``--set`` values)."""
+    return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
+def nearest(name: str, known: Any) -> str:
+    """`` (did you mean 'x'?)`` for the closest known name, or '' if none is close."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def unknown_parameter(name: str, value: Any) -> ParameterError:
+    """The error for a parameter name that is not in :data:`SPECS` (nearest known name)."""
+    return ParameterError(name, value, "a known parameter name" + nearest(name, SPECS))
+
+
+def _group_names() -> list[str]:
+    return list(_GROUP_TYPES)
+
+
+def _node_param_names() -> set[str]:
+    return {n for names in NODE_PARAMS.values() for n in names} | set(COMMON_NODE_PARAMS)
+
+
+def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, Any]) -> None:
+    """Model parameters (``group: {key: value}``) and node parameters of one section."""
+    own = _node_param_names()
     for key, value in tree.items():
-        name = f"{prefix}.{key}" if prefix else str(key)
-        if isinstance(value, Mapping):
-            _flatten(name, value, out)
+        key = str(key)
+        if key in _GROUP_TYPES:
+            if not isinstance(value, Mapping):
+                raise ParamsFileError(
+                    f"params file {path}: '{key}' must be a group of parameters "
+                    f"({key}.{fields(_GROUP_TYPES[key])[0].name}: ...), got {value!r}")
+            for sub, v in value.items():
+                name = f"{key}.{sub}"
+                if name not in SPECS:
+                    raise ParamsFileError(f"params file {path}: "
+                                          f"{unknown_parameter(name, v)}")
+                if isinstance(v, Mapping):
+                    raise ParamsFileError(f"params file {path}: parameter '{name}' must be a "
+                                          f"value ({SPECS[name].allowed()}), got a group")
+                out[name] = v
+        elif key in own:
+            if isinstance(value, Mapping):
+                raise ParamsFileError(f"params file {path}: node parameter '{key}' must be a "
+                                      f"value, got a group")
+            out[key] = value
+        elif isinstance(value, Mapping):
+            raise ParamsFileError(f"params file {path}: unknown group '{key}'"
+                                  + nearest(key, _group_names()))
         else:
-            out[name] = value
+            dotted = [n for n in SPECS if n.endswith("." + key)]
+            hint = (f" (did you mean '{dotted[0]}'?)" if dotted
+                    else nearest(key, sorted(own) + _group_names()))
+            raise ParamsFileError(f"params file {path}: unknown parameter '{key}' in section "
+                                  f"'{section}'{hint}")
 
 
 def read_params_file(path: str | Path) -> dict[str, Any]:
-    """Dotted name -> value from a ROS 2 params file (the ``/**`` section, then node sections)."""
+    """Dotted name -> value from a ROS 2 params file (the ``/**`` section, then node sections).
+
+    Strict: an empty file, a file that is not ``<node>: ros__parameters: {...}``, an unknown
+    section, group or parameter (named, with the nearest known name) or a group given a
+    value raises :class:`ParamsFileError`. Node parameters (:data:`NODE_PARAMS`) come back
+    under their plain names. Numbers are read as rcl reads them (:class:`YamlLoader`).
+    """
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = parse_yaml(path.read_text())
     except OSError as err:
         raise ParamsFileError(f"cannot read params file {path}: {err.strerror}") from err
-    except yaml.YAMLError as err:
-        raise ParamsFileError(f"params file {path} is not valid YAML: {err}") from err
-    if not isinstance(doc, Mapping) or not doc:
-        raise ParamsFileError(f"params file {path}: expected '/**: ros__parameters: ...'")
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise ParamsFileError(f"params file {path} is not valid YAML: {first}") from err
+    layout = "expected '/**: ros__parameters: <group>: <name>: value'"
+    if doc is None or doc == {}:
+        raise ParamsFileError(f"params file {path} is empty: {layout}")
+    if not isinstance(doc, Mapping):
+        raise ParamsFileError(f"params file {path} holds {type(doc).__name__} {doc!r}: {layout}")
+    nodes = ["/**"] + list(NODE_PARAMS)
     flat: dict[str, Any] = {}
     for node, body in doc.items():
+        name = str(node).lstrip("/") if str(node) != "/**" else "/**"
+        if name not in nodes:
+            raise ParamsFileError(f"params file {path}: unknown section '{node}'"
+                                  + nearest(str(node), nodes) + f": {layout}")
         if not isinstance(body, Mapping) or not isinstance(body.get("ros__parameters"), Mapping):
             raise ParamsFileError(f"params file {path}: section '{node}' lacks 'ros__parameters'")
-        _flatten("", body["ros__parameters"], flat)
+        extra = [k for k in body if k != "ros__parameters"]
+        if extra:
+            raise ParamsFileError(f"params file {path}: section '{node}' has '{extra[0]}' "
+                                  f"beside 'ros__parameters'")
+        _flatten(path, str(node), body["ros__parameters"], flat)
     return flat
 
 
@@ -340,18 +481,19 @@ def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodPara
     given as a dict via ``load_params(path, **{"ground.scale": 2.0})``.
     """
     flat = read_params_file(path or default_params_path())
-    known = {k: v for k, v in flat.items() if k in SPECS}
+    known = {k: v for k, v in flat.items() if k in SPECS}  # the rest: node parameters
     for name, value in overrides.items():
         name = name.replace("__", ".")
         if name not in SPECS:
-            raise ParameterError(name, value, "a known parameter name")
+            raise unknown_parameter(name, value)
         known[name] = value
     return from_flat(known)
 
 
 __all__ = [
-    "ActuatorParams", "BodyParams", "CONTROLLERS", "GainParams", "GaitParams", "GroundParams",
-    "HexapodParams", "INTEGRATORS", "MODES", "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec",
+    "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "GainParams",
+    "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
+    "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
     "check_controller", "check_value", "default_params_path", "from_flat", "load_params",
-    "read_params_file", "validate",
+    "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
 ]

@@ -1,0 +1,343 @@
+"""scripts/run_graph.sh end to end: honest exit codes, Ctrl-C, kill -9, settings that hold.
+
+Each test runs the real script (the Python launcher behind it, real node processes) on its
+own ROS_DOMAIN_ID and waits on conditions (log lines, files, process exits).
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import stat
+import subprocess
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import pytest
+
+from hexapod_metrics.graph_launcher import EXIT_CODES
+
+from .conftest import call, hexapod_cli, next_domain_id, ros_client
+
+ROOT = Path(__file__).resolve().parents[2]
+#: conftest.FAST_TIMING as run_graph.sh options (behaviour, not the paper's numbers)
+FAST = ("--set", "sim.dt=0.0001", "--control-rate", "1000")
+
+
+class Script:
+    """scripts/run_graph.sh running in its own session, output in files."""
+
+    def __init__(self, tmp: Path, *args: str, bag: Path | None = None) -> None:
+        self.domain = next_domain_id()
+        self.bag = bag or tmp / "bag"
+        self.logs = Path(f"{self.bag}_logs")
+        self.out = tmp / "stdout.txt"
+        self.err = tmp / "stderr.txt"
+        env = {**os.environ, "ROS_DOMAIN_ID": str(self.domain),
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        with self.out.open("w") as out, self.err.open("w") as err:
+            self.proc = subprocess.Popen(
+                [str(ROOT / "scripts" / "run_graph.sh"), "--bag", str(self.bag), *FAST, *args],
+                stdout=out, stderr=err, env=env, start_new_session=True)
+
+    def log(self, name: str) -> str:
+        try:
+            return (self.logs / f"{name}.log").read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def wait_for(self, cond: Callable[[], bool], timeout: float, what: str) -> None:
+        end = time.monotonic() + timeout
+        while not cond():
+            assert self.proc.poll() is None or cond(), (
+                f"run_graph ended ({self.proc.returncode}) before {what}:\n{self.stderr()}")
+            assert time.monotonic() < end, f"timed out waiting for {what}:\n{self.stderr()}"
+            time.sleep(0.05)
+
+    def wait_log(self, name: str, text: str, timeout: float = 120) -> None:
+        self.wait_for(lambda: text in self.log(name), timeout, f"'{text}' in {name}.log")
+
+    def pids(self) -> dict[str, int]:
+        self.wait_for(lambda: (self.logs / "pids.json").exists(), 60, "pids.json")
+        return json.loads((self.logs / "pids.json").read_text())
+
+    def wait(self, timeout: float = 180) -> int:
+        return self.proc.wait(timeout)
+
+    def stdout(self) -> str:
+        return self.out.read_text()
+
+    def stderr(self) -> str:
+        return self.err.read_text()
+
+    def kill_all(self) -> None:
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+        try:
+            pids = json.loads((self.logs / "pids.json").read_text())
+        except (OSError, ValueError):
+            return
+        for pid in pids.values():
+            with_pid(pid, lambda p: os.kill(p, signal.SIGKILL))
+
+
+def with_pid(pid: int, action: Callable[[int], Any]) -> None:
+    try:
+        action(pid)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
+def alive(pid: int) -> bool:
+    """True if ``pid`` runs (and is not a zombie)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.fixture
+def script(tmp_path: Path):
+    started: list[Script] = []
+
+    def start(*args: str) -> Script:
+        s = Script(tmp_path, *args)
+        started.append(s)
+        return s
+
+    yield start
+    for s in started:
+        s.kill_all()
+
+
+def table_rows(stdout: str) -> list[str]:
+    """The indices table's rows (first word = the label)."""
+    lines = stdout.splitlines()
+    i = next(i for i, line in enumerate(lines) if line.startswith("indices per controller"))
+    return [line.strip() for line in lines[i + 2:] if line.startswith("  ")]
+
+
+def test_default_scenario_exits_0_with_both_controllers_segments(script):
+    s = script("--duration", "3")
+    assert s.wait() == 0, s.stderr()
+    rows = table_rows(s.stdout())
+    assert [r.split()[0] for r in rows] == ["pd_pf", "pd_p"], s.stdout()
+    assert "0 missed" in s.stdout() and f"bag: {s.bag}" in s.stdout()
+    assert (s.bag / "indices.json").exists()
+
+
+def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(script):
+    s = script("--duration", "4", "--no-switch", "--controller", "pd_pf")
+    s.wait_log("metrics", "cycle 0 [0, 1] s")
+    os.kill(s.pids()["pd_pf_controller"], signal.SIGKILL)
+    code = s.wait()
+    err, out = s.stderr(), s.stdout()
+    assert code == EXIT_CODES["node died"] == 3, err
+    assert "pd_pf_controller was killed by SIGKILL during the run" in err
+    assert "fallback (exit 7)" in err  # the fallback is reported too
+    assert_uncommanded_cycles_are_labelled(s, "pd_pf")
+    assert f"bag: {s.bag}" in out
+
+
+def assert_uncommanded_cycles_are_labelled(s: Script, controller: str) -> None:
+    """Cycles with ticks the controller did not command carry another label, in
+    indices.json and in the printed table; clean cycles keep the controller's name. (Under
+    load the first ticks may go unanswered too: that cycle is then 'mixed', rightly.)"""
+    doc = json.loads((s.bag / "indices.json").read_text())
+    cycles = doc["cycles"]
+    assert any(c["uncommanded_ticks"] > 0 for c in cycles), cycles
+    for c in cycles:
+        assert (c["label"] == controller) == (c["uncommanded_ticks"] == 0), c
+    last = doc["segments"][-1]["last_full_cycle"]
+    row = table_rows(s.stdout())[-1]
+    assert row.split()[0] == last["label"], row
+    if last["uncommanded_ticks"]:
+        assert row.split()[0] in ("fallback", "held") or row.startswith(f"mixed({controller}+")
+
+
+def test_fallback_alone_exits_7(script, tmp_path):
+    # the controller in charge is deactivated (not killed): no node dies, the sim falls back
+    s = script("--duration", "6", "--no-switch", "--controller", "pd_p")
+    s.wait_log("metrics", "cycle 0 [0, 1] s")
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    with ros_client(s.domain) as node:
+        req = ChangeState.Request()
+        req.transition.id = Transition.TRANSITION_DEACTIVATE
+        assert call(node, ChangeState, "/pd_p_controller/change_state", req).success
+    code = s.wait()
+    assert code == EXIT_CODES["fallback"] == 7, s.stderr()
+    assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
+    assert_uncommanded_cycles_are_labelled(s, "pd_p")
+
+
+def test_killed_recorder_exits_4_and_stops_the_graph(script):
+    s = script("--duration", "0")
+    s.wait_log("hexapod_sim", "lockstep mode")
+    pids = s.pids()
+    os.kill(pids["metrics"], signal.SIGKILL)
+    code = s.wait()
+    assert code == EXIT_CODES["recorder failed"] == 4, s.stderr()
+    assert "the recorder (metrics) was killed by SIGKILL during the run" in s.stderr()
+    assert "stopping the graph" in s.stderr()
+    assert f"bag: {s.bag}" in s.stdout()
+    assert not any(alive(p) for n, p in pids.items() if n != "launcher")
+
+
+def test_ctrl_c_prints_the_indices_so_far_and_the_bag(script):
+    s = script("--duration", "0", "--controller", "pd_p")
+    s.wait_log("metrics", "cycle 1 [1, 2] s")
+    os.kill(s.proc.pid, signal.SIGINT)
+    code = s.wait()
+    out = s.stdout()
+    assert code == 0, s.stderr()  # --duration 0: Ctrl-C is the normal end
+    rows = table_rows(out)
+    assert rows and rows[0].split()[0] == "pd_p", out
+    assert f"bag: {s.bag}" in out
+    assert (s.bag / "indices.json").exists() and (s.bag / "metadata.yaml").exists()
+
+
+def test_ctrl_c_before_the_end_of_a_timed_run_exits_130(script):
+    s = script("--duration", "60", "--no-switch")
+    s.wait_log("metrics", "cycle 0 [0, 1] s")
+    os.kill(s.proc.pid, signal.SIGINT)
+    assert s.wait() == EXIT_CODES["interrupted"] == 130
+    assert f"bag: {s.bag}" in s.stdout() and table_rows(s.stdout())
+
+
+def test_kill_9_of_the_launcher_leaves_no_node_running(script):
+    s = script("--duration", "0")
+    s.wait_log("hexapod_sim", "lockstep mode")
+    pids = s.pids()
+    nodes = {n: p for n, p in pids.items() if n != "launcher"}
+    assert len(nodes) == 5 and all(alive(p) for p in nodes.values())
+    assert pids["launcher"] == s.proc.pid  # run_graph.sh execs the launcher
+    os.kill(s.proc.pid, signal.SIGKILL)
+    s.proc.wait()
+    end = time.monotonic() + 60
+    while any(alive(p) for p in nodes.values()) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert not [n for n, p in nodes.items() if alive(p)]
+    # they stopped as on SIGTERM: the recorder closed its bag
+    assert (s.bag / "metadata.yaml").exists() and (s.bag / "indices.json").exists()
+
+
+def test_fast_dds_profile_is_private_to_the_graph(make_graph, tmp_path):
+    import tempfile
+
+    planted = Path(tempfile.gettempdir()) / "hexapod_fastdds_planted_by_someone.xml"
+    g = make_graph()
+    path = Path(g.env["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    assert path != planted and path.read_text().count("127.0.0.1") == 1
+    assert stat.S_IMODE(path.parent.stat().st_mode) == 0o700
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    g.stop_all()
+    assert not path.exists()
+
+
+def test_settings_on_the_running_graph_take_effect_or_are_refused(make_graph):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    g = make_graph()
+    for n in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
+        g.start(n)
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+
+    def pv(v: object) -> ParameterValue:
+        if isinstance(v, str):
+            return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=v)
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(v))
+
+    with ros_client(g.domain_id) as node:
+        def set_one(target: str, name: str, v: object):
+            req = SetParameters.Request(parameters=[Parameter(name=name, value=pv(v))])
+            return call(node, SetParameters, f"/{target}/set_parameters", req).results[0]
+
+        # node parameters read once at start are read-only
+        for name, v in (("switch_at", 1.0), ("switch_to", "pd_p"), ("stop_at_end", "x"),
+                        ("wait_for", ""), ("startup_timeout", 5.0)):
+            r = set_one("hexapod_sim", name, v)
+            assert not r.successful and "read-only" in r.reason, (name, r.reason)
+        r = set_one("trajectory_generator", "lookahead", 3.0)
+        assert not r.successful and "read-only" in r.reason
+        # a parameter set on a node that does not use it is refused, not ignored
+        r = set_one("pd_pf_controller", "ground.k_y", 5.0)
+        assert not r.successful
+        r = set_one("pd_pf_controller", "pd_p.kp1", 5.0)
+        assert not r.successful
+        r = set_one("hexapod_sim", "pd_pf.kp1", 5.0)
+        assert not r.successful
+        r = set_one("pd_pf_controller", "pd_pf.kp1", 21000.0)  # its own gain: taken live
+        assert r.successful
+        # run.controller on the sim goes through the same liveness check as `switch`
+        req = ChangeState.Request()
+        req.transition.id = Transition.TRANSITION_DEACTIVATE
+        assert call(node, ChangeState, "/pd_p_controller/change_state", req).success
+        end = time.monotonic() + 30
+        while True:
+            r = set_one("hexapod_sim", "run.controller", "pd_p")
+            if not r.successful or time.monotonic() > end:
+                break
+            time.sleep(0.1)  # the graph may still show the old subscription
+        assert not r.successful
+        assert "pd_p_controller is not active" in r.reason, r.reason
+    assert g.procs["hexapod_sim"].poll() is None
+    assert "switched" not in g.log("hexapod_sim")
+    sw = hexapod_cli(g.domain_id, "switch", "pd_p")  # activates it, then hands over
+    assert sw.returncode == 0, sw.stderr
+    assert "switching pd_pf -> pd_p" in sw.stdout and "was inactive, now active" in sw.stdout
+    g.wait_log("hexapod_sim", "switched pd_pf -> pd_p", timeout=60)
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path):
+    """A 3 MB tmpfs (root only: mount); unmounted afterwards."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mnt)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs to fill (needs root): {r.stderr.strip()}")
+    yield mnt
+    subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def test_full_disk_exits_5_and_stops_the_graph(small_disk, tmp_path):
+    s = Script(tmp_path, "--duration", "6", bag=small_disk / "bag")
+    try:
+        code = s.wait()
+    finally:
+        s.kill_all()
+    err = s.stderr()
+    assert code == EXIT_CODES["disk full"] == 5, err
+    assert "disk full (exit 5): the recorder ran out of disk space" in err
+    assert f"bag: {s.bag}" in s.stdout()
+
+
+@pytest.mark.parametrize("node", ["hexapod_sim", "pd_pf_controller", "metrics"])
+@pytest.mark.parametrize("edit, message", [
+    (("k_y: 1000000.0", "k_yy: 1000000.0"),
+     "parameter 'ground.k_yy' = 1000000.0 is invalid: allowed a known parameter name (did you "
+     "mean 'ground.k_y'?)"),
+    (("    ground:", "    grond:"), "unknown group 'grond' (did you mean 'ground'?)"),
+])
+def test_node_started_by_hand_refuses_a_misspelt_params_file(make_graph, tmp_path, node, edit,
+                                                             message):
+    from hexapod_sim.core.params import default_params_path
+
+    f = tmp_path / "typo.yaml"
+    f.write_text(default_params_path().read_text().replace(*edit))
+    g = make_graph(params=str(f))
+    g.start(node, f"bag_path:={tmp_path / 'bag'}" if node == "metrics" else "wait_for:=''")
+    assert g.wait_exit(node, 120) == 2
+    log = g.log(node)
+    assert message in log and "Traceback" not in log
+    assert len([line for line in log.splitlines() if "ERROR" in line]) == 1

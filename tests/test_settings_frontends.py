@@ -1,0 +1,179 @@
+"""Bad settings through both front ends: the `hexapod` CLI and scripts/run_graph.sh.
+
+Every case is refused before anything runs: one line on stderr naming the key or option
+(with the nearest known name for a typo), exit code 2, and the same words from both front
+ends (they share the parser and the checks). Nothing is started, so no ROS domain is used.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from hexapod_sim.core.params import default_params_path
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = default_params_path().read_text()
+
+
+def hexapod(*args: str) -> subprocess.CompletedProcess:
+    """The `hexapod` CLI's entry point (what scripts/hexapod runs), in this process: the
+    same code as a subprocess, without a second interpreter start per case."""
+    from hexapod_metrics.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse
+            code = exc.code if isinstance(exc.code, int) else 2
+    return subprocess.CompletedProcess(["hexapod", *args], code, out.getvalue(),
+                                       err.getvalue())
+
+
+def run_graph(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "ROS_DOMAIN_ID": "231"}  # never used: nothing may start
+    return subprocess.run([str(ROOT / "scripts" / "run_graph.sh"), *args], capture_output=True,
+                          text=True, timeout=300, env=env)
+
+
+def one_error_line(r: subprocess.CompletedProcess, prog: str) -> str:
+    """The message after '<prog>: error: ' of a one-line, exit-2 failure."""
+    assert r.returncode == 2, (r.returncode, r.stdout, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith(f"{prog}: error: "), lines[0]
+    assert "run_graph: ROS_DOMAIN_ID" not in r.stdout  # no node was started
+    return lines[0][len(f"{prog}: error: "):]
+
+
+PARAMS_FILES = [  # (file content, text the one line must hold)
+    ("", "is empty"),
+    ("42\n", "holds int 42"),
+    ("[1, 2]\n", "holds list"),
+    ("/**:\n  ros__parameters:\n    ground: 5\n", "'ground' must be a group of parameters"),
+    ("/**:\n  ros__parameters:\n    ground:\n      k_y: {a: 1}\n",
+     "parameter 'ground.k_y' must be a value"),
+    ("/**:\n  other: 1\n", "section '/**' lacks 'ros__parameters'"),
+    ("/**:\n  ros__parameters: 3\n", "section '/**' lacks 'ros__parameters'"),
+    ("hexapod_smi:\n  ros__parameters:\n    stop_at_end: true\n",
+     "unknown section 'hexapod_smi' (did you mean 'hexapod_sim'?)"),
+    ("robot: [1, 2\n", "is not valid YAML"),
+    (BASE.replace("k_y: 1000000.0", "k_yy: 1000000.0"),
+     "parameter 'ground.k_yy' = 1000000.0 is invalid: allowed a known parameter name "
+     "(did you mean 'ground.k_y'?)"),
+    (BASE.replace("duty_factor:", "dutyfactor:"),
+     "parameter 'gait.dutyfactor' = 0.5 is invalid: allowed a known parameter name "
+     "(did you mean 'gait.duty_factor'?)"),
+    (BASE.replace("    ground:", "    grond:"), "unknown group 'grond' (did you mean 'ground'?)"),
+    (BASE.replace("    ground:", "    k_y: 3\n    ground:"),
+     "unknown parameter 'k_y' in section '/**' (did you mean 'body.k_y'?)"),
+    (BASE.replace("t_max: 400.0", "t_max: fast"),
+     "parameter 'actuator.t_max' = 'fast' is invalid: allowed float in (0, inf]"),
+    (BASE.replace("body_height: 1.8", "body_height: 1.99"),
+     "parameter 'gait.body_height' = 1.99 is invalid"),
+    (BASE.replace("step_length: 1.0", "step_length: 4.0").replace("velocity: 1.0",
+                                                                    "velocity: 4.0"),
+     "parameter 'gait.step_length' = 4.0 is invalid"),
+    (BASE.replace("foot_clearance: 0.2", "foot_clearance: 1.8"),
+     "parameter 'gait.foot_clearance' = 1.8 is invalid"),
+]
+
+
+@pytest.mark.parametrize("content, message", PARAMS_FILES,
+                         ids=[f"file{i}" for i in range(len(PARAMS_FILES))])
+def test_bad_params_file_is_one_line_naming_the_key_in_both_front_ends(tmp_path, content,
+                                                                       message):
+    f = tmp_path / "p.yaml"
+    f.write_text(content)
+    cli = one_error_line(hexapod("simulate", "--params", str(f)), "hexapod simulate")
+    graph = one_error_line(run_graph("--params", str(f), "--bag", str(tmp_path / "b")),
+                           "run_graph")
+    assert message in cli
+    assert cli == graph
+    assert not (tmp_path / "b").exists() and not (tmp_path / "b_logs").exists()
+
+
+OPTIONS = [  # (options, text the one line must hold); both front ends take them
+    (["--t-max", "abc"], "argument --t-max: parameter 'actuator.t_max' = 'abc' is invalid: "
+     "allowed float in (0, inf]"),
+    (["--t-max=abc"], "argument --t-max: parameter 'actuator.t_max' = 'abc'"),
+    (["--t-max", "nan"], "argument --t-max: parameter 'actuator.t_max' = nan"),
+    (["--t-max=-5"], "argument --t-max: parameter 'actuator.t_max' = -5.0"),
+    (["--ground-scale", "0"], "argument --ground-scale: parameter 'ground.scale' = 0.0"),
+    (["--ground-scale=x1"], "argument --ground-scale: parameter 'ground.scale' = 'x1'"),
+    (["--duration", "nan"], "argument --duration: parameter 'run.duration' = nan"),
+    (["--duration", "1e7"], "argument --duration: parameter 'run.duration' = 10000000.0"),
+    (["--duration=abc"], "argument --duration: parameter 'run.duration' = 'abc'"),
+    (["--set", "ground.k_yy=3"], "parameter 'ground.k_yy' = 3 is invalid: allowed a known "
+     "parameter name (did you mean 'ground.k_y'?)"),
+    (["--set", "gait.duty_factor=1.5"], "parameter 'gait.duty_factor' = 1.5"),
+    (["--set=actuator.t_max=1e-3x"], "parameter 'actuator.t_max' = '1e-3x'"),
+    (["--control-rate", "0"], "argument --control-rate: '0' is not a control rate (Hz)"),
+    (["--control-rate=abc"], "argument --control-rate: 'abc' is not a control rate (Hz)"),
+    (["--control-rate", "1500"], "parameter 'sim.control_period' = "),
+    (["--no-such-option"], "unrecognized arguments: --no-such-option"),
+]
+
+
+@pytest.mark.parametrize("options, message", OPTIONS,
+                         ids=[" ".join(o) for o, _ in OPTIONS])
+def test_bad_option_is_one_line_naming_it_in_both_front_ends(tmp_path, options, message):
+    unknown = "unrecognized" in message  # argparse's top-level parser reports it
+    cli = one_error_line(hexapod("simulate", *options),
+                         "hexapod" if unknown else "hexapod simulate")
+    graph = one_error_line(run_graph(*options, "--bag", str(tmp_path / "b")), "run_graph")
+    assert message in cli
+    assert message in graph
+    if "unrecognized" not in message:
+        assert cli == graph
+
+
+GRAPH_ONLY = [
+    (["--switch-at", "nan"], "argument --switch-at: 'nan' is not a simulated time"),
+    (["--switch-at=-1"], "argument --switch-at: '-1' is not a simulated time"),
+    (["--switch-at", "100"], "argument --switch-at: 100 s is after the end of the run"),
+    (["--controller", "pd_x"], "argument --controller: invalid choice: 'pd_x'"),
+    (["--mode=fast"], "argument --mode: invalid choice: 'fast'"),
+    (["--duration"], "argument --duration: expected one argument"),
+]
+
+
+@pytest.mark.parametrize("options, message", GRAPH_ONLY,
+                         ids=[" ".join(o) for o, _ in GRAPH_ONLY])
+def test_bad_graph_option_is_one_line(tmp_path, options, message):
+    assert message in one_error_line(run_graph(*options, "--bag", str(tmp_path / "b")),
+                                     "run_graph")
+
+
+CLI_ONLY = [
+    (["simulate", "--duration", "1e6"], "parameter 'run.duration' = 1000000.0 is invalid: "
+     "allowed at most"),
+    (["simulate", "--switch", "nan:pd_p"], "--switch expects TIME:CONTROLLER"),
+    (["simulate", "--switch", "1:pd_x"], "CONTROLLER must be pd_p or pd_pf"),
+    (["sweep", "ground", "--range", "10:100"], "argument --range: '10:100' is not"),
+    (["sweep", "ground", "--range", "10:100:0"], "argument --range: '10:100:0': N = 0"),
+    (["sweep", "ground", "--range", ","], "argument --range: ',' is not"),
+    (["sweep", "ground", "--range", "abc"], "argument --range: 'abc' is not"),
+    (["sweep", "ground", "--range=10:5:3"], "argument --range: '10:5:3': HI = 5 is below"),
+    (["sweep", "tmax", "--t-max-list", "400,x"], "argument --t-max-list: '400,x' is not"),
+    (["switch", "pd_p", "--timeout=nan"], "argument --timeout: 'nan' is not a timeout (s)"),
+    (["status", "--timeout", "-1"], "argument --timeout: '-1' is not a timeout (s)"),
+]
+
+
+@pytest.mark.parametrize("args, message", CLI_ONLY, ids=[" ".join(a) for a, _ in CLI_ONLY])
+def test_bad_cli_input_is_one_line(args, message):
+    assert message in one_error_line(hexapod(*args), f"hexapod {args[0]}")
+
+
+def test_yaml_numbers_are_numbers_in_the_cli(tmp_path):
+    f = tmp_path / "p.yaml"
+    f.write_text(BASE.replace("t_max: 400.0", "t_max: 1.5e2"))
+    r = hexapod("simulate", "--params", str(f), "--controller", "pd_p", "--duration", "1")
+    assert r.returncode == 0, r.stderr
+    assert "T_max = 150 N m" in r.stdout
