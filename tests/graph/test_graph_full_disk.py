@@ -31,7 +31,8 @@ def test_full_disk_closes_a_readable_bag_reports_it_and_exits_3(make_graph, tmp_
         with ros_client(g.domain_id) as node:
             node.create_subscription(
                 DiagnosticArray, "/hexapod/status",
-                lambda m: statuses.extend(s for s in m.status if s.name == "metrics"),
+                lambda m: statuses.extend(s for s in m.status if s.name == "metrics"
+                                          and s.level == b"\x02"),  # ERROR (not heartbeats)
                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
             ex = SingleThreadedExecutor(context=node.context)
             ex.add_node(node)
