@@ -10,8 +10,10 @@ samples to 4 bytes on the way) and ends with a 32-byte trailer::
 
 with tag = keyed BLAKE2b-128(key, topic NUL payload padding sender sequence). A subscriber of the
 graph accepts a message only if the tag is right (so it comes from a process holding the
-run's key and was not altered, nor moved to another topic) and its sequence is above the
-last one seen from that sender (so a recorded message cannot be replayed). The trailer sits
+run's key and was not altered, nor moved to another topic) and its sequence was not seen
+before from that sender (within REPLAY_WINDOW of the newest, so a recorded message cannot be
+replayed, yet a replayed copy that overtakes the original does not cost the messages behind
+it). The trailer sits
 after the CDR payload: ROS tools that deserialize the message (``ros2 topic echo``) ignore
 it; the recorder strips it, so bags hold plain CDR.
 
@@ -139,6 +141,10 @@ class Verifier:
         self.topic = topic
         self._base = _base(key, topic)
         self.last: dict[bytes, int] = {}  # sender -> newest sequence accepted
+        #: sender -> the sequences accepted within REPLAY_WINDOW below the newest: a message
+        #: may arrive after a newer one (a replayed copy can overtake the original in a
+        #: reader's queue), so "not seen before" is the test, not "newer than the newest".
+        self.seen: dict[bytes, set[int]] = {}
 
     def verify(self, data: bytes) -> bytes:
         """The payload of an authentic, new message; raises Rejected otherwise."""
@@ -154,12 +160,29 @@ class Verifier:
         seq, pad = word & _SEQ_MASK, word >> 56
         if pad > 7 or pad > n:
             raise Rejected("unauthenticated")
-        if seq <= self.last.get(sender, 0):
+        newest = self.last.get(sender, 0)
+        seen = self.seen.get(sender)
+        if seq <= newest - REPLAY_WINDOW or (seen is not None and seq in seen) or seq == 0:
             raise Rejected("replayed")
-        if sender not in self.last and len(self.last) >= MAX_SENDERS:
-            del self.last[next(iter(self.last))]
-        self.last[sender] = seq
+        if seen is None:
+            if len(self.last) >= MAX_SENDERS:
+                old = next(iter(self.last))
+                del self.last[old]
+                self.seen.pop(old, None)
+            seen = self.seen[sender] = set()
+        seen.add(seq)
+        if seq > newest:
+            self.last[sender] = newest = seq
+        else:
+            self.last.setdefault(sender, newest)
+        if len(seen) > 2 * REPLAY_WINDOW:
+            self.seen[sender] = {x for x in seen if x > newest - REPLAY_WINDOW}
         return data[:n - pad]
+
+
+#: How far (in messages of one sender) an authentic message may arrive behind the newest
+#: one and still be accepted once.
+REPLAY_WINDOW = 65536
 
 
 class Unsigned:
@@ -177,5 +200,6 @@ class Unsigned:
         return data
 
 
-__all__ = ["AUTH_ENV", "AuthError", "KEY_ENV", "Rejected", "Signer", "TRAILER_BYTES",
+__all__ = ["AUTH_ENV", "AuthError", "KEY_ENV", "REPLAY_WINDOW", "Rejected", "Signer",
+           "TRAILER_BYTES",
            "Unsigned", "Verifier", "new_key_file", "read_key_file", "run_key"]
