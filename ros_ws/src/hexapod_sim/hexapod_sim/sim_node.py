@@ -101,6 +101,8 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "pd_pf_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
     "metrics": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
                  T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS), ()),
+    # the markers node draws every state from t = 0: tick 0 waits for its subscriptions too
+    "markers": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES), ()),
 }
 DEFAULT_WAIT_FOR = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
