@@ -62,10 +62,6 @@ def test_log_time_is_the_message_stamp_on_every_stamped_topic(graph_bag):
     assert seen[T.JOINT_STATES] == round(DURATION * 1000) + 1
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "known gap: in 2 of 4 fresh-clone runs the markers node's first marker came at 0.36-0.46 s "
-    "although tick 0 waits for its subscriptions; the cause is not found yet (the other "
-    "assertions, log time = stamp and no gaps after the first marker, held in every run)"))
 def test_markers_cover_the_run_from_zero_without_gaps(graph_bag):
     _, messages = graph_bag
     markers = [(t, m) for topic, t, m in messages if topic == T.MARKERS]

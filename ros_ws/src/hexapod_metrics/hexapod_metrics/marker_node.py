@@ -11,6 +11,7 @@ animate`` draws.
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 import rclpy
@@ -106,12 +107,39 @@ class MarkerNode(Node):
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
         self.signer = self.guard.signer(T.MARKERS)
+        deliver_to = declare_node_param(
+            self, "deliver_to", "metrics",
+            "comma-separated nodes that must receive the markers from t = 0 ('' = none)")
+        timeout = declare_node_param(self, "startup_timeout", 60.0,
+                                     "wall s to wait for deliver_to, then start anyway")
+        # The sim's tick 0 waits for this node's state subscriptions; they are made only once
+        # the recorder's subscription is matched, or the first markers are published to
+        # nobody (a volatile writer does not keep them for a reader it matches later).
+        self._wait_for_readers([n.strip() for n in deliver_to.split(",") if n.strip()],
+                               timeout)
         for topic in STATE:
             # Deep queues: a marker for every 1/rate s of sim time, even when this node
             # falls behind the sim for a while (a short queue rolled over: gaps of 66-264 ms).
             self.loop.subscribe(JointState, topic, self._make_cb(topic),
                                 C.TOPIC_QOS[topic].subscriber(C.RECORD_DEPTH))
         self.announcer = ParamAnnouncer(self, p.sim.control_period)
+
+    def _readers_missing(self, nodes: list[str]) -> list[str]:
+        infos = self.get_subscriptions_info_by_topic(T.MARKERS)
+        missing = [n for n in nodes if not any(i.node_name == n for i in infos)]
+        if not missing and self.pub.get_subscription_count() < len(infos):
+            missing.append(f"matching of {T.MARKERS}")
+        return missing
+
+    def _wait_for_readers(self, nodes: list[str], timeout: float) -> None:
+        """Block (wall s, at most ``timeout``) until ``nodes`` subscribe to the markers and
+        this node's publisher has matched every subscription the graph shows."""
+        deadline = time.monotonic() + timeout
+        while (missing := self._readers_missing(nodes)) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if missing:
+            self.get_logger().warning(f"starting without {', '.join(missing)} after "
+                                      f"{timeout:g} s: the first markers may not reach them")
 
     def _make_cb(self, topic: str):  # type: ignore[no-untyped-def]
         def cb(data: bytes) -> None:

@@ -351,8 +351,9 @@ NODE_PARAMS: dict[str, tuple[str, ...]] = {
     "trajectory_generator": ("lookahead",),
     "pd_p_controller": ("autostart",),
     "pd_pf_controller": ("autostart",),
-    "metrics": ("bag_path", "batch_interval"),
-    "markers": ("rate",),
+    "metrics": ("bag_path", "batch_interval", "reorder_window", "max_bag_size",
+                "max_bag_duration"),
+    "markers": ("rate", "deliver_to", "startup_timeout"),
     "foxglove_bridge": ("host", "port", "batch_interval"),
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)
