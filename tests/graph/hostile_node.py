@@ -43,10 +43,12 @@ from visualization_msgs.msg import MarkerArray
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.msg_auth import TRAILER_BYTES, Signer, run_key
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 
 TYPES = {T.JOINT_STATES: JointState, T.FOOT_FORCES: JointState, T.HIP_STATES: JointState,
          T.REFERENCE: JointState, T.JOINT_COMMANDS: JointState, T.ACTIVE_CONTROLLER: String,
-         T.STATUS: DiagnosticArray, T.MARKERS: MarkerArray, T.CLOCK: Clock}
+         T.STATUS: DiagnosticArray, T.MARKERS: MarkerArray, T.CLOCK: Clock,
+         T.PARAMETERS: DiagnosticArray}
 NS = 1_000_000_000
 
 
@@ -145,6 +147,15 @@ class Hostile:
             tampered = cmd[:n] + struct.pack("<d", 80.0) + cmd[n + 8:]
             self.send(T.JOINT_COMMANDS, tampered, "tampered")
 
+    @staticmethod
+    def _forged_record(st: JointState) -> bytes:
+        """A well-formed, checksummed record that says the sim's ground changed to 5.0."""
+        tick = (st.header.stamp.sec * NS + st.header.stamp.nanosec) // 1_000_000
+        rec = ParamRecord("hexapod_sim", "change", tick, tick * 1_000_000,
+                          {"ground.scale": 5.0})
+        status = C.Status(f"{RECORD_NAME}/{rec.node}", "ok", "change", rec.to_map())
+        return serialize_message(C.diagnostic_array(rec.stamp_ns, [status]))
+
     def _rogue_tick(self) -> None:
         st = self.last_state
         if st is None:
@@ -157,6 +168,7 @@ class Hostile:
                       "forged controller")
             for raw in list(self.genuine[T.ACTIVE_CONTROLLER])[-1:]:
                 self.send(T.ACTIVE_CONTROLLER, raw, "replayed")
+            self.send(T.PARAMETERS, self._forged_record(st), "forged ground change")
             t = st.header.stamp.sec * NS + st.header.stamp.nanosec + NS // 2
             clock = Clock()
             clock.clock.sec, clock.clock.nanosec = divmod(t, NS)

@@ -26,6 +26,7 @@ import pytest
 
 from hexapod_control.core.closed_loop import run
 from hexapod_control.core.controllers import control_law, controller_code, gain_vector
+from hexapod_metrics.core.bag_params import bag_params
 from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
 from hexapod_sim import conversions as C
 from hexapod_sim.core import msg_checks as M
@@ -88,7 +89,9 @@ def _read(bag: Path) -> dict:
         announced = [C.decode_string(bytes(d)) for _, _, d in b.messages([T.ACTIVE_CONTROLLER])]
         clock = [C.decode_stamp(bytes(d)) for _, _, d in b.messages([T.CLOCK])]
         statuses = [bytes(d) for _, _, d in b.messages([T.STATUS])]
-    return {"arrays": arrays, "announced": announced, "clock": clock, "status": statuses}
+        params = bag_params(b)
+    return {"arrays": arrays, "announced": announced, "clock": clock, "status": statuses,
+            "params": params}
 
 
 def _assert_equals_clean_run(rec: dict, duration: float) -> None:
@@ -220,7 +223,8 @@ def test_rogue_node_is_not_at_the_controls_and_is_reported(make_graph, tmp_path,
                  f"{T.JOINT_COMMANDS} constant stale command", f"{T.JOINT_COMMANDS} replayed",
                  f"{T.JOINT_COMMANDS} tampered", f"{T.JOINT_STATES} forged +0.1 rad",
                  f"{T.JOINT_STATES} replayed at once", f"{T.JOINT_STATES} replayed 50 ticks later",
-                 f"{T.REFERENCE} forged +0.2 rad", f"{T.ACTIVE_CONTROLLER} forged controller"):
+                 f"{T.REFERENCE} forged +0.2 rad", f"{T.ACTIVE_CONTROLLER} forged controller",
+                 f"{T.PARAMETERS} forged ground change"):
         assert sent.get(what, 0) > 0, (what, sent)
 
     rec = _read(bag)
@@ -245,6 +249,10 @@ def test_rogue_node_is_not_at_the_controls_and_is_reported(make_graph, tmp_path,
         assert who in report["outside_publishers"][topic], topic
     assert report["dropped"][f"{T.JOINT_STATES} ({M.REPLAYED})"] > 0
     assert report["dropped"][f"{T.ACTIVE_CONTROLLER} ({M.UNAUTHENTICATED})"] > 0
+    # A forged parameter record (valid checksum, the sim's name) changes nothing recorded.
+    assert report["dropped"][f"{T.PARAMETERS} ({M.UNAUTHENTICATED})"] > 0
+    assert rec["params"].timeline.changes == () and rec["params"].params.ground.scale == 1.0
+    assert all(r.node != "hexapod_sim" or r.kind == "start" for r in rec["params"].records)
     for node in ("pd_pf_controller", "trajectory_generator"):
         assert (f"publishers on {T.JOINT_STATES} that are not nodes of this graph: {who}"
                 in logs[node])

@@ -57,20 +57,28 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
             f"wait_for:={NODES}")
     with ros_client(g.domain_id) as node:
         _wait_sim_time(node, 0.5)
-        # Hostile input first: a record that fails its checksum, and bytes that do not decode.
+        # Hostile input first. Signed with the run's key (a buggy node of the graph): a record
+        # that fails its checksum, and bytes that do not decode; unsigned (any process on
+        # the domain): a well-formed record with a valid checksum.
         from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.serialization import serialize_message
 
         from hexapod_sim import conversions as C
+        from hexapod_sim.core.msg_auth import Signer, read_key_file
         from hexapod_sim.core.param_log import ParamRecord
 
+        signer = Signer(read_key_file(g.env["HEXAPOD_KEY_FILE"]), T.PARAMETERS)
         forged = ParamRecord("hexapod_sim", "change", 600, 600_000_000, {"ground.scale": 9.0})
         bad = dict(forged.to_map(), sha256="0" * 64)
         pub = node.create_publisher(DiagnosticArray, T.PARAMETERS,
                                     C.TOPIC_QOS[T.PARAMETERS].publisher())
-        pub.publish(C.diagnostic_array(600_000_000, [C.Status(
-            "hexapod_parameters/hexapod_sim", "ok", "change", bad)]))
-        pub.publish(b"\x00\x01\x00\x00garbage")
+        pub.publish(signer.sign(serialize_message(C.diagnostic_array(600_000_000, [C.Status(
+            "hexapod_parameters/hexapod_sim", "ok", "change", bad)]))))
+        pub.publish(signer.sign(b"\x00\x01\x00\x00garbage"))
         g.wait_log("metrics", "dropped a /hexapod/parameters message (2 so far)", 60)
+        pub.publish(C.diagnostic_array(600_000_000, [C.Status(
+            "hexapod_parameters/hexapod_sim", "ok", "change", forged.to_map())]))
+        g.wait_log("metrics", "dropped a message on /hexapod/parameters: unauthenticated", 60)
         _wait_sim_time(node, 1.0)
         value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0)
         req = SetParameters.Request(parameters=[Parameter(name="ground.scale", value=value)])

@@ -311,9 +311,12 @@ class MetricsNode(Node):
 
     def _on_param_record(self, data: bytes) -> None:
         """A node's parameter record: into the bag (message, MCAP metadata, mirror)."""
+        payload = self.guard.payload(T.PARAMETERS, data)  # the graph's own nodes only
+        if payload is None:
+            return
         self.counts[T.PARAMETERS] += 1
         try:
-            msg = deserialize_message(data, DiagnosticArray)
+            msg = deserialize_message(payload, DiagnosticArray)
             recs = [ParamRecord.from_map(st.values, f"parameter record '{st.name}'")
                     for st in C.statuses(msg) if st.name.startswith(RECORD_NAME + "/")]
         except Exception as err:  # noqa: BLE001 - anything undecodable is dropped, counted
@@ -326,7 +329,7 @@ class MetricsNode(Node):
                 self.dropped += 1
                 return
             try:
-                added = self.params_log.add(rec, data if len(recs) == 1 else None)
+                added = self.params_log.add(rec, payload if len(recs) == 1 else None)
             except BagStorageError as err:
                 self.failure = err
                 self.loop.stop()

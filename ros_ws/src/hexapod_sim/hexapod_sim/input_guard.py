@@ -33,7 +33,7 @@ PUBLISHERS: dict[str, tuple[str, ...]] = {
     T.FOOT_FORCES: ("hexapod_sim",), T.HIP_STATES: ("hexapod_sim",),
     T.ACTIVE_CONTROLLER: ("hexapod_sim",), T.REFERENCE: ("trajectory_generator",),
     T.JOINT_COMMANDS: CONTROLLER_NODES, T.INDICES: ("metrics",), T.MARKERS: ("markers",),
-    T.STATUS: GRAPH_NODES,
+    T.STATUS: GRAPH_NODES, T.PARAMETERS: (*GRAPH_NODES, "foxglove_bridge"),
 }
 #: Topics whose messages the graph's nodes sign (/clock is a bounded type: no room for a tag).
 SIGNED_TOPICS = frozenset(PUBLISHERS) - {T.CLOCK}

@@ -8,6 +8,10 @@ and one ``change`` record per accepted runtime change, with the tick it took eff
   (``deferred=True`` and :meth:`ParamAnnouncer.flush` with that tick): exact;
 * other nodes apply a change at once and announce the tick given by ``next_tick`` (the
   first tick they process after it, e.g. the next state a controller answers).
+
+Records are signed like every other message of the graph (the node's ``guard``): the
+recorder keeps only records of the graph's own nodes, so no process on the domain can
+forge the parameters a bag says it ran with.
 """
 from __future__ import annotations
 
@@ -36,6 +40,8 @@ class ParamAnnouncer:
         self.sent = 0
         self.pub = node.create_publisher(DiagnosticArray, T.PARAMETERS,
                                          C.TOPIC_QOS[T.PARAMETERS].publisher())
+        self.guard = node.guard  # type: ignore[attr-defined]  # every graph node has one
+        self.signer = self.guard.signer(T.PARAMETERS)
         node.add_post_set_parameters_callback(self._changed)
         values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
         # Each node declares only the model parameters it uses (ros_params.USES); the start
@@ -64,7 +70,7 @@ class ParamAnnouncer:
         stamp = T.stamp_ns(tick * self.period)
         rec = ParamRecord(self.node.get_name(), kind, tick, stamp, values)
         status = C.Status(f"{RECORD_NAME}/{rec.node}", "ok", kind, rec.to_map())
-        self.pub.publish(C.diagnostic_array(stamp, [status]))
+        self.pub.publish(self.guard.signed(self.signer, C.diagnostic_array(stamp, [status])))
         self.sent += 1
         return rec
 
