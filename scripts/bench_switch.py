@@ -12,8 +12,13 @@ ticks whose command arrived within its period, with and without switching.
 
 --hog adds one CPU hog (a busy loop in its own process) beside the graph.
 
+--kill-idle S runs two graphs without switches side by side in time (one after the other)
+and kills the idle controller (SIGKILL) S wall seconds into the second one; from the sim's
+status messages in each bag it prints the share of on-time ticks before and after that
+moment, so a dead idle controller's cost shows against the same run without a kill.
+
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
-       [--no-baseline]
+       [--no-baseline] [--kill-idle S]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
@@ -70,8 +75,34 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
     return switches, lost
 
 
-def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path) -> dict:
-    """One realtime run; the sim's figures and the lost ticks of each switch."""
+def on_time_split(bag: Path, at_tick: int) -> tuple[float, float]:
+    """(% on time before, after ``at_tick``) from the sim's status counters in ``bag``."""
+    from hexapod_metrics.core import cdr
+    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_sim.core import topics as T
+
+    rows = []
+    with open_bag(bag) as b:
+        for _, _, data in b.messages([T.STATUS]):
+            for st in cdr.decode_diagnostic_array(bytes(data))[1]:
+                if st.name == "hexapod_sim":
+                    v = dict(st.values)
+                    rows.append((int(v["tick"]), int(v["on_time_ticks"])))
+    rows.sort()
+    if not rows:
+        raise RuntimeError(f"no status of the sim in {bag}")
+    before = max((r for r in rows if r[0] <= at_tick), default=rows[0])
+    last = rows[-1]
+
+    def pct(a: tuple[int, int], b: tuple[int, int]) -> float:
+        return 100.0 * (b[1] - a[1]) / max(b[0] - a[0], 1)
+    return pct((0, 0), before), pct(before, last)
+
+
+def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
+        kill_idle: float | None = None) -> dict:
+    """One realtime run; the sim's figures and the lost ticks of each switch (with
+    ``kill_idle``: the idle controller is killed that many wall s after tick 0)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -99,6 +130,14 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path) -> 
         g.wait_log("hexapod_sim", "realtime mode", timeout=180)
         assert client.wait_for_service(timeout_sec=60), "no /hexapod_sim/set_parameters"
         start = time.monotonic()
+        kill_tick = None
+        if kill_idle is not None:
+            while time.monotonic() < start + kill_idle:
+                ex.spin_once(timeout_sec=0.01)
+            if kill_idle > 0:
+                g.procs["pd_p_controller"].kill()  # pd_pf is in charge: pd_p is idle
+            # realtime: the tick at that moment is about wall s since tick 0 / period
+            kill_tick = int(kill_idle / args.period)
         target = "pd_p"
         for i in range(switches):
             due = start + (i + 1) * args.every
@@ -124,8 +163,11 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path) -> 
     at = None if switches else [int(round(i * args.every / args.period))
                                 for i in range(1, int(duration / args.every))]
     done, lost = lost_ticks(log_dir / "bag", period_ns, at)
-    return {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
-            "switches": len(done), "lost": lost}
+    out = {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
+           "switches": len(done), "lost": lost}
+    if kill_tick is not None:
+        out["split"] = on_time_split(log_dir / "bag", kill_tick)
+    return out
 
 
 def main() -> int:
@@ -138,6 +180,9 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="s of the run without switches")
     ap.add_argument("--hog", action="store_true", help="one CPU hog beside the graph")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
+    ap.add_argument("--kill-idle", type=float, metavar="S",
+                    help="compare runs without switches, one with the idle controller killed "
+                    "S wall s in")
     args = ap.parse_args()
     hog = None
     if args.hog:
@@ -146,6 +191,16 @@ def main() -> int:
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
           f"{', one CPU hog' if hog else ''}; realtime mode, {1 / args.period:g} Hz")
     base = 170 + os.getpid() % 60
+    if args.kill_idle is not None:
+        with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
+            for i, (label, at) in enumerate((("no kill", 0.0), ("idle killed", args.kill_idle))):
+                r = run(args, 0, (base + i) % 101 + 1, Path(tmp) / f"run{i}", kill_idle=at)
+                b, a = r["split"] if i else on_time_split(
+                    Path(tmp) / f"run{i}" / "bag", int(args.kill_idle / args.period))
+                print(f"{label}: {r['ticks']} ticks, {r['missed']} missed; on time "
+                      f"{b:.2f} % before and {a:.2f} % after {args.kill_idle:g} s", flush=True)
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return 0
     try:
         with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
             runs = [("switching", args.switches)]
