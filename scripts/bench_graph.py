@@ -135,7 +135,8 @@ def main() -> int:
                               Path(tmp) / f"{key}_{j}_{i}", args.rt, rate)
                 rows.append(r)
                 cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
-                print(f"{key} {rate / 1000:g} kHz run {i + 1} (a busy loop got {100 * avail:.0f} % of a core just "
+                print(f"{key} {rate / 1000:g} kHz run {i + 1} (a busy loop got "
+                      f"{100 * avail:.0f} % of a core just "
                       f"before): {r['ticks']} ticks, wall {r['wall']:.2f} s, "
                       f"real-time factor {r['rtf']:.3f}, missed {r['missed']}, late "
                       f"{r['late']}, on time {r['on_time']}, round trip median "

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Run the whole test suite: set up what is missing, then pytest over tests/ and
-# each package's own test/ directory. Extra arguments go to pytest (naming a
-# test path runs only that); the exit code is pytest's.
+# Run the whole test suite: set up what is missing, lint (ruff) and type-check
+# (mypy, strict on every core/ package; settings in pyproject.toml), then pytest
+# over tests/ and each package's own test/ directory. Extra arguments go to
+# pytest (naming a test path runs only that, without the lint and type checks);
+# the exit code is the first failing step's.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -16,4 +18,10 @@ done
 for arg in "$@"; do
   if [[ "$arg" != -* && -e "${arg%%::*}" ]]; then dirs=(); break; fi
 done
+if (( ${#dirs[@]} )); then
+  (cd "$root" && ruff check ros_ws/src scripts tests)
+  (cd "$root" && mypy --python-executable "$(command -v python)" \
+    ros_ws/src/hexapod_sim/hexapod_sim/core ros_ws/src/hexapod_control/hexapod_control/core \
+    ros_ws/src/hexapod_metrics/hexapod_metrics/core)
+fi
 exec python -m pytest --rootdir "$root" -q "${dirs[@]}" "$@"

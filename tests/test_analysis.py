@@ -1,6 +1,4 @@
 """Offline analysis: equals the engine, splits at switches, survives hundreds of bad bags."""
-import os
-import shutil
 import signal
 import subprocess
 import sys

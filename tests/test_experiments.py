@@ -34,7 +34,8 @@ def test_sweep_on_a_local_dask_cluster_equals_local_processes():
     p = load_params()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster:
-        dask = ground_sweep(p, PERCENTS, 400.0, backend=make_backend("dask", cluster.scheduler_address))
+        backend = make_backend("dask", cluster.scheduler_address)
+        dask = ground_sweep(p, PERCENTS, 400.0, backend=backend)
     local = ground_sweep(p, PERCENTS, 400.0, backend=ProcessBackend(2))
     assert _rows(dask) == _rows(local)
 

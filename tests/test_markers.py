@@ -25,7 +25,8 @@ def test_markers_of_a_run_round_trip_through_a_bag(tmp_path):
     fig = stick_figure(r.obs[k], 1.0)
     legs = msg.markers[0]
     assert len(legs.points) == 24
-    assert (legs.points[3].x, legs.points[3].z) == pytest.approx(tuple(fig.foot[0]))  # leg 1: hip, knee, knee, foot
+    # leg 1: hip, knee, knee, foot
+    assert (legs.points[3].x, legs.points[3].z) == pytest.approx(tuple(fig.foot[0]))
     assert len(msg.markers[2].points) == int(fig.contact.sum()) >= 3
     with BagWriter(tmp_path / "m") as bag:
         bag.add_topic("/hexapod/markers", "visualization_msgs/msg/MarkerArray")

@@ -11,7 +11,7 @@ import yaml
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import default_params_path, load_params
+from hexapod_sim.core.params import default_params_path
 
 from .conftest import call, fast_params, hexapod_cli, ros_client, sim_summary
 

@@ -7,7 +7,6 @@ import re
 import threading
 from pathlib import Path
 
-import pytest
 
 from hexapod_metrics.core.bag_params import read_records
 from hexapod_metrics.core.bag_reader import open_bag

@@ -5,9 +5,9 @@ while running), creates the command publisher and subscribes to the reference an
 forces; *activate* enables the publisher and subscribes to the joint states (the last
 endpoint to appear, which tells the sim this controller is ready); *deactivate* stops
 answering and drops the joint-state subscription (so the graph shows that it cannot take
-over: the sim refuses a switch to it); *cleanup* removes everything. With ``autostart`` (default true) the node
-configures and activates itself at start, so no lifecycle manager is needed; the
-lifecycle services keep working (``hexapod switch`` uses them).
+over: the sim refuses a switch to it); *cleanup* removes everything. With ``autostart``
+(default true) the node configures and activates itself at start, so no lifecycle manager
+is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
 Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
 is answered once the reference and the foot forces with the same stamp are there (both

@@ -1,4 +1,5 @@
-"""`hexapod`: the project's command line (simulate, analyze, sweep, tune, reproduce, switch, status).
+"""`hexapod`: the project's command line (simulate, analyze, sweep, tune, reproduce, switch,
+status).
 
 Each subcommand lives in a module that registers itself with :func:`register`-style
 ``add_parser(subparsers)`` functions listed in :data:`COMMAND_MODULES`; this file only wires
@@ -73,7 +74,7 @@ def _fmt(v: float) -> str:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from .core.indices import INDEX_NAMES, REPORTED_NAMES, INDEX_UNITS
+    from .core.indices import REPORTED_NAMES, INDEX_UNITS
     from .core.simulate import simulate
 
     p = params_from_args(args)

@@ -40,7 +40,6 @@ import os
 import signal
 import sys
 import time
-from pathlib import Path
 from typing import Any, Callable
 
 from rclpy.callback_groups import CallbackGroup

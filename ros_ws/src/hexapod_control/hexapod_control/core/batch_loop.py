@@ -42,7 +42,8 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
     """Run columns 0..n-1 of a block for len(theta_d) ticks from torque zero.
 
     X (STATE_SIZE, B) states, PT (MODEL_SIZE, B) model vectors, codes (B,) controller codes,
-    G (5, B) gains, cols (B,) the case index of each column; B = batch_physics.LANES. Records the sample of tick k
+    G (5, B) gains, cols (B,) the case index of each column; B = batch_physics.LANES.
+    Records the sample of tick k
     into obs_out[case, k - rec_offset] when that row exists (the tick after the last too),
     and sets ok[case].
     """

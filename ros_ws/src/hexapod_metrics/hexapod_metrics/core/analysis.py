@@ -288,7 +288,7 @@ def with_param_boundaries(changes: list[tuple[int, str]],
     out = dict(changes)
     for k in tl.change_ticks:
         if k > 0 and k not in out:
-            out[k] = label_ticks(changes, [k])[0] if changes else "unknown"
+            out[k] = label_ticks(changes, np.array([k]))[0] if changes else "unknown"
     return sorted(out.items())
 
 
@@ -302,8 +302,9 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
         t1 = bounds[j] * dt if j < len(bounds) else t_last
         mine = [c for c in cycles if c.controller == who and c.sums is not None
                 and t0 <= c.t_a and c.t_b <= max(t1, t0) + 1e-9]
-        total = None
+        total: WindowSums | None = None
         for c in mine:
+            assert c.sums is not None  # filtered above
             total = c.sums if total is None else total + c.sums
         changed: tuple[tuple[str, Any], ...] = ()
         if tl is not None:

@@ -93,11 +93,11 @@ def bag_params(bag: Bag) -> BagParams:
             raise BagReadError(f"{bag.path}: recorded start parameters: {err}") from err
         return BagParams(p, FROM_MCAP, tl, tuple(records))
     try:
-        p = params_from_custom_data(custom)
+        mirrored = params_from_custom_data(custom)
     except (HexapodError, ValueError, TypeError) as err:
         raise BagReadError(f"{bag.path}: metadata.yaml's parameters: {err}") from err
-    if p is not None:
-        return BagParams(p, FROM_YAML, None)
+    if mirrored is not None:
+        return BagParams(mirrored, FROM_YAML, None)
     return BagParams(load_params(), DEFAULTS, None)
 
 

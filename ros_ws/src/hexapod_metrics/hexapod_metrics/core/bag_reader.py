@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -640,7 +640,7 @@ def _block_messages(
     raw = mf.inflate(block)
     if block.indexes is not None and len(ids) < len(mf.channels):  # a few topics: index
         found = [(int(o), c) for c in ids if c in block.indexes
-                 for o in (mf.index_offsets(block, c) if c in block.indexes else ())]
+                 for o in cast("npt.NDArray[np.int64]", mf.index_offsets(block, c))]
         for pos, channel in sorted(found):
             if pos + 31 > len(raw) or raw[pos] != 5:
                 msg = f'{mf.what}: message index does not match the chunk records (corrupt)'

@@ -17,7 +17,8 @@ from typing import Iterable, Mapping, Sequence
 from .convergence import TRACKING, Convergence
 from .indices import REPORTED_NAMES
 
-#: C3: "large degradation" = the summed tracking errors at least this many times the T_max 400 value.
+#: C3: "large degradation" = the summed tracking errors at least this many times the
+#: T_max 400 value.
 C3_FACTOR = 2.0
 #: C4: "stability problems" = divergence, or errors or torque steps this many times worse.
 C4_FACTOR = 2.0

@@ -75,7 +75,7 @@ class Convergence:
         if self.diverged:
             return False
         b, c = getattr(self.runs[1], name), getattr(self.runs[2], name)
-        return abs(b - c) < tolerance(name, c)
+        return bool(abs(b - c) < tolerance(name, c))
 
     @property
     def converged(self) -> bool:

@@ -112,7 +112,7 @@ def sweep(p: HexapodParams, variable: str, values: Sequence[float],
 def ground_sweep(p: HexapodParams, percents: Sequence[float], t_max: float,
                  **kwargs: object) -> SweepResult:
     """E2/E4: all four ground parameters scaled by one percentage of the base values."""
-    res = sweep(p, "ground.scale", np.asarray(percents, dtype=float) / 100.0,
+    res = sweep(p, "ground.scale", [float(x) / 100.0 for x in percents],
                 actuator__t_max=t_max, **kwargs)  # type: ignore[arg-type]
     return res
 
@@ -277,7 +277,8 @@ def tune(p: HexapodParams, controller: str, grid: Mapping[str, Sequence[float]] 
     ref_conv = convs.pop() if convs is not None else None
     best, scores, diverged, not_walking = select_best(gains, outs, p)
     ref_score = hip_score(ref_out) if walking(ref_out, p) else math.nan
-    return TuneResult(controller, grid, gains, outs, scores, diverged, not_walking,
+    return TuneResult(controller, {k: list(v) for k, v in grid.items()}, gains, outs, scores,
+                      diverged, not_walking,
                       gains[best], float(scores[best]), ref_gains, ref_score, convs, ref_conv)
 
 

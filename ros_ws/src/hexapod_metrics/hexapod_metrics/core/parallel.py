@@ -93,16 +93,16 @@ class DaskBackend:
         from distributed import Client, as_completed as dask_completed
 
         try:
-            client = Client(self.address, timeout="10s")
+            client = Client(self.address, timeout="10s")  # type: ignore[no-untyped-call]
         except OSError as err:
             raise ConnectionError(f"cannot reach the Dask scheduler at {self.address}: "
                                   f"{err}") from err
         try:
             futures = client.map(evaluate_chunk, list(chunks), pure=False)
-            for fut in dask_completed(futures):
+            for fut in dask_completed(futures):  # type: ignore[no-untyped-call]
                 yield fut.result()
         finally:
-            client.close()
+            client.close()  # type: ignore[no-untyped-call]
 
 
 BACKENDS: dict[str, Callable[..., Backend]] = {

@@ -19,7 +19,7 @@ from hexapod_sim.core.params import SPECS, HexapodParams, from_flat
 from . import cdr
 from .bag_writer import BagWriter
 from .cdr import DiagnosticStatus
-from .indices import INDEX_NAMES, REPORTED_NAMES, Indices, indices_from_obs
+from .indices import REPORTED_NAMES, Indices, indices_from_obs
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 PARAMS_KEY = "hexapod_params"

@@ -208,5 +208,6 @@ def swap_columns(A, a, b):  # type: ignore[no-untyped-def]
         A[r, a], A[r, b] = A[r, b], A[r, a]
 
 
-__all__ = ["LANES", "block_integrate", "block_prepare", "block_sample", "block_scratch", "block_solve",
+__all__ = ["LANES", "block_integrate", "block_prepare", "block_sample", "block_scratch",
+           "block_solve",
            "swap_columns"]

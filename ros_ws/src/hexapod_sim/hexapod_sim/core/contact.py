@@ -1,4 +1,5 @@
-"""Foot-ground contact: linear spring-dashpot with stored touchdown point (model.md "Ground contact").
+"""Foot-ground contact: linear spring-dashpot with stored touchdown point (model.md "Ground
+contact").
 
 Foot i is in contact while y_F < 0; the touchdown point x_0 is stored at the first instant of a
 contact and forgotten when the foot leaves. The ground pushes, never pulls:

@@ -141,7 +141,8 @@ def leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, ffx, ffy):  # type: ignore[
 @njit(cache=True, error_model="numpy")
 def leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ignore[no-untyped-def]
                  tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h):
-    """ddq of one leg (cos/sin of theta1 and theta1 + theta2 given) from H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF (paper eq. 5).
+    """ddq of one leg (cos/sin of theta1 and theta1 + theta2 given) from
+    H ddq + c + g = tau + J_H^T F_RH + J_F^T F_RF (paper eq. 5).
 
     tm1, tm2: joint torques (N m); (fhx, fhy): body force on the hip (N); (ffx, ffy): ground
     force on the foot at the current velocity (N). (bx, by) (N s/m) and h (s): ground damping

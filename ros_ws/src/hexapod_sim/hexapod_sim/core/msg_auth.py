@@ -107,7 +107,7 @@ def run_key(env: Mapping[str, str] | None = None) -> bytes | None:
     return read_key_file(path)
 
 
-def _base(key: bytes, topic: str) -> "hashlib._Hash":
+def _base(key: bytes, topic: str) -> "hashlib.blake2b":
     h = hashlib.blake2b(key=key, digest_size=TAG_BYTES)
     h.update(topic.encode() + b"\0")
     return h

@@ -95,7 +95,7 @@ class BodyParams:
 
 @dataclass(frozen=True)
 class GroundParams:
-    """Foot-ground spring-dashpot (model.md "Ground contact"); the effective values are base x scale."""
+    """Foot-ground spring-dashpot (model.md "Ground contact"); effective values: base x scale."""
 
     k_x: float = _f("ground stiffness K_x at 100 % (N/m)", 0.0, 1e12)
     k_y: float = _f("ground stiffness K_y at 100 % (N/m)", 0.0, 1e12)
@@ -204,7 +204,8 @@ class HexapodParams:
         return self.pd_p if controller == "pd_p" else self.pd_pf
 
     def with_values(self, **dotted: Any) -> "HexapodParams":
-        """A validated copy with some parameters changed: ``p.with_values(**{'ground.scale': 2})``."""
+        """A validated copy with some parameters changed:
+        ``p.with_values(**{'ground.scale': 2})``."""
         flat = self.to_flat()
         for name, value in dotted.items():
             if name not in flat:
@@ -258,7 +259,7 @@ def check_value(name: str, value: Any) -> Any:
 
 def check_controller(controller: str) -> str:
     """Validate a controller name."""
-    return check_value("run.controller", controller)
+    return str(check_value("run.controller", controller))
 
 
 def validate(p: HexapodParams) -> HexapodParams:
@@ -359,7 +360,7 @@ NODE_PARAMS: dict[str, tuple[str, ...]] = {
 COMMON_NODE_PARAMS = ("use_sim_time",)
 
 
-class YamlLoader(yaml.SafeLoader):
+class YamlLoader(yaml.SafeLoader):  # type: ignore[misc]  # PyYAML ships no types
     """PyYAML's safe loader with YAML 1.2 floats, as rcl's parser reads them: ``1e6``,
     ``1E-3``, ``.inf``, ``-.inf``, ``.nan`` are floats (PyYAML's YAML 1.1 reads ``1e6``
     as a string)."""

@@ -82,7 +82,7 @@ class SwitchServer:
 
     def poll(self) -> list[tuple[str, str]]:
         """Pending requests as (text, reply address)."""
-        out = []
+        out: list[tuple[str, str]] = []
         while True:
             try:
                 data, addr = self.sock.recvfrom(MAX_DATAGRAM)
