@@ -1,5 +1,4 @@
-"""`hexapod`: the project's command line (simulate, analyze, sweep, tune, reproduce, switch,
-status).
+"""`hexapod`: the project's command line (simulate, analyze, sweep, tune, reproduce...).
 
 Each subcommand lives in a module that registers itself with :func:`register`-style
 ``add_parser(subparsers)`` functions listed in :data:`COMMAND_MODULES`; this file only wires
@@ -11,62 +10,19 @@ import argparse
 import importlib
 import json
 import sys
-from typing import Any, Callable, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from hexapod_sim.core.errors import HexapodError
-from hexapod_sim.core.params import HexapodParams, load_params
 
-from .cli_args import OneLineParser, control_rate, param_value
+from .cli_args import OneLineParser, param_value, params_arguments, params_from_args, parse_value
 from .core.errors import BagError
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.
-COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_analysis")
-
-
-def params_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options every engine command shares: params file and the usual overrides."""
-    parser.add_argument("--params", help="ROS 2 params file (default: the shipped base case)")
-    parser.add_argument("--t-max", type=param_value("actuator.t_max"), dest="t_max",
-                        help="actuator saturation T_max in N m ('inf' for ideal actuators)")
-    parser.add_argument("--ground-scale", type=param_value("ground.scale"), dest="ground_scale",
-                        help="factor on all four ground parameters (1.0 = 100 %%)")
-    parser.add_argument("--control-rate", type=control_rate, dest="control_rate", metavar="HZ",
-                        help="control rate in Hz: sim.control_period = 1/HZ, a whole number "
-                        "of physics steps (10000 = control at every step)")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                        help="override any parameter by its dotted name, e.g. gait.velocity=0.8")
-
-
-def params_from_args(args: argparse.Namespace) -> HexapodParams:
-    """Load the params file and apply --t-max, --ground-scale and --set overrides."""
-    overrides: dict[str, Any] = {}
-    for item in args.set:
-        name, sep, text = item.partition("=")
-        if not sep:
-            raise HexapodError(f"--set expects NAME=VALUE, got {item!r}")
-        overrides[name.strip()] = _parse_value(text.strip())
-    if args.t_max is not None:
-        overrides["actuator.t_max"] = args.t_max
-    if args.ground_scale is not None:
-        overrides["ground.scale"] = args.ground_scale
-    if args.control_rate is not None:
-        if not args.control_rate > 0 or args.control_rate == float("inf"):
-            raise HexapodError(f"--control-rate: expected a positive number of Hz, got "
-                               f"{args.control_rate:g}")
-        overrides["sim.control_period"] = 1.0 / args.control_rate
-    return load_params(args.params, **overrides)
-
-
-def _parse_value(text: str) -> Any:
-    from hexapod_sim.core.params import parse_yaml
-
-    try:
-        return parse_yaml(text)
-    except Exception:  # noqa: BLE001 (any YAML error: then it is text)
-        return text
+COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_experiments",
+                   "hexapod_metrics.cmd_analyze", "hexapod_metrics.animation")
 
 
 def _fmt(v: float) -> str:
@@ -100,7 +56,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         name, eq, text = assignment.partition("=")
         if not sep or not eq:
             raise HexapodError(f"--change expects TIME:NAME=VALUE, got {item!r}")
-        changes.append((float(when), {name.strip(): _parse_value(text.strip())}))
+        changes.append((float(when), {name.strip(): parse_value(text.strip())}))
     for c in controllers:
         sim = simulate(p, c, args.duration, switches=switches, param_changes=changes)
         if args.bag:

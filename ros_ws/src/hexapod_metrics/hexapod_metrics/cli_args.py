@@ -9,6 +9,8 @@ launcher (`scripts/run_graph.sh`), so both accept and refuse the same input in t
   invalid: allowed float in (0, inf]``).
 * :func:`number`: a plain finite number within bounds (``--switch-at``, ``--timeout``).
 * :func:`value_range`: ``a:b:n`` (log-spaced), ``a:b:n:lin`` or a comma list, validated.
+* :func:`params_arguments` / :func:`params_from_args`: the params-file options every engine
+  command shares, and the parameters they give.
 """
 from __future__ import annotations
 
@@ -20,8 +22,8 @@ from typing import Any, Callable, NoReturn
 import numpy as np
 import yaml
 
-from hexapod_sim.core.errors import ParameterError
-from hexapod_sim.core.params import SPECS, check_value, parse_yaml
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.params import SPECS, HexapodParams, check_value, load_params, parse_yaml
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -138,5 +140,49 @@ def value_range(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-__all__ = ["OneLineParser", "control_rate", "number", "param_value", "parse_range", "read_number",
-           "value_range"]
+
+
+def params_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every engine command shares: params file and the usual overrides."""
+    parser.add_argument("--params", help="ROS 2 params file (default: the shipped base case)")
+    parser.add_argument("--t-max", type=param_value("actuator.t_max"), dest="t_max",
+                        help="actuator saturation T_max in N m ('inf' for ideal actuators)")
+    parser.add_argument("--ground-scale", type=param_value("ground.scale"), dest="ground_scale",
+                        help="factor on all four ground parameters (1.0 = 100 %%)")
+    parser.add_argument("--control-rate", type=control_rate, dest="control_rate", metavar="HZ",
+                        help="control rate in Hz: sim.control_period = 1/HZ, a whole number "
+                        "of physics steps (10000 = control at every step)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override any parameter by its dotted name, e.g. gait.velocity=0.8")
+
+
+def params_from_args(args: argparse.Namespace) -> HexapodParams:
+    """Load the params file and apply --t-max, --ground-scale and --set overrides."""
+    overrides: dict[str, Any] = {}
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        if not sep:
+            raise HexapodError(f"--set expects NAME=VALUE, got {item!r}")
+        overrides[name.strip()] = parse_value(text.strip())
+    if args.t_max is not None:
+        overrides["actuator.t_max"] = args.t_max
+    if args.ground_scale is not None:
+        overrides["ground.scale"] = args.ground_scale
+    if args.control_rate is not None:
+        if not args.control_rate > 0 or args.control_rate == float("inf"):
+            raise HexapodError(f"--control-rate: expected a positive number of Hz, got "
+                               f"{args.control_rate:g}")
+        overrides["sim.control_period"] = 1.0 / args.control_rate
+    return load_params(args.params, **overrides)
+
+
+def parse_value(text: str) -> Any:
+    """A --set/--change value: YAML (numbers, booleans, lists), else the text itself."""
+    try:
+        return parse_yaml(text)
+    except Exception:  # noqa: BLE001 (any YAML error: then it is text)
+        return text
+
+
+__all__ = ["OneLineParser", "control_rate", "number", "param_value", "params_arguments",
+           "params_from_args", "parse_range", "parse_value", "read_number", "value_range"]

@@ -179,14 +179,14 @@ def settings(args: argparse.Namespace) -> tuple[HexapodParams, dict[str, Any]]:
 
     Raises ParameterError / ParamsFileError (one line, named key) exactly as the CLI does.
     """
-    from .cli import _parse_value
+    from .cli_args import parse_value
 
     overrides: dict[str, Any] = {}
     for item in args.set:
         name, sep, text = item.partition("=")
         if not sep or not name.strip():
             raise LaunchError(f"--set expects NAME=VALUE, got {item!r}")
-        overrides[name.strip()] = _parse_value(text.strip())
+        overrides[name.strip()] = parse_value(text.strip())
     overrides["run.controller"] = args.controller
     overrides["sim.mode"] = args.mode
     if args.duration > 0:

@@ -12,14 +12,16 @@ parameter validation needs it to reject unreachable gaits.
 """
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from .errors import UnreachableTargetError
-from .kinematics import ik_scalar, joint_rates
-from .params import N_LEGS, HexapodParams
+from .kinematics import N_LEGS, ik_scalar, joint_rates
+
+if TYPE_CHECKING:  # for the annotations only: params imports this module (validation)
+    from .params import HexapodParams
 
 
 class Reference(NamedTuple):

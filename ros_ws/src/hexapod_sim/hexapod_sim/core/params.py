@@ -21,8 +21,8 @@ from typing import Any, Mapping
 import yaml
 
 from .errors import ParameterError, ParamsFileError
-
-N_LEGS = 6
+from .gait import reach_bounds
+from .kinematics import N_LEGS
 CONTROLLERS = ("pd_p", "pd_pf")
 MODES = ("lockstep", "realtime")
 INTEGRATORS = ("implicit_ground_damping", "semi_implicit_euler")
@@ -272,8 +272,6 @@ def validate(p: HexapodParams) -> HexapodParams:
         raise ParameterError("sim.control_period", p.sim.control_period,
                              f"an integer multiple of sim.dt = {p.sim.dt:g}")
     # Reachability of the whole gait: the hip-foot distance over a cycle (eq. 4a).
-    from .gait import reach_bounds  # local import: gait imports this module
-
     lo, hi = reach_bounds(p)
     r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
     r_max = p.robot.leg_length_1 + p.robot.leg_length_2
@@ -307,8 +305,6 @@ def _reach_culprit(p: HexapodParams, candidates: tuple[str, ...], too_far: bool)
     """The parameter at fault for an unreachable gait: the first of ``candidates`` that
     differs from the shipped base case and, put back to its base value, makes the gait
     reach (else the first that differs, else the first candidate)."""
-    from .gait import reach_bounds
-
     flat = p.to_flat()
     base = _base_flat()
     changed = [n for n in candidates if flat[n] != base.get(n, flat[n])]

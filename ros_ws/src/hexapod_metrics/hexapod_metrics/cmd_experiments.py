@@ -13,8 +13,7 @@ import numpy as np
 
 from hexapod_sim.core.errors import HexapodError
 
-from .cli import params_arguments, params_from_args
-from .cli_args import parse_range
+from .cli_args import params_arguments, params_from_args, parse_range
 from .core.indices import INDEX_NAMES
 
 
@@ -202,7 +201,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Register sweep, tune, reproduce, analyze and animate."""
+    """Register sweep, converge, tune and reproduce."""
     sp = sub.add_parser("sweep", help="ground or T_max sweep for both controllers (E2-E4)")
     params_arguments(sp)
     sp.add_argument("kind", choices=["ground", "tmax"], help="what to sweep")
@@ -245,11 +244,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
                     help="a few points per experiment (every point still checked in dt)")
     _backend_args(rp)
     rp.set_defaults(func=_cmd_reproduce)
-
-    from . import animation, cmd_analyze
-
-    cmd_analyze.add_parser(sub)
-    animation.add_parser(sub)
 
 
 __all__ = ["add_parser", "progress_factory"]
