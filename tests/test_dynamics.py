@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hexapod_sim.core.body import LINKS, body_forces
-from hexapod_sim.core.contact import ground_force
+from hexapod_sim.core.contact import limit_force, spring_damper, update_contact
 from hexapod_sim.core.dynamics import bias_forces, leg_accel, mass_matrix
 from hexapod_sim.core.engine import advance, initial_state
 from hexapod_sim.core.layout import (P_G, P_HIPX, P_KBX, P_KBY, P_L1, P_L2, P_MF, P_MH, P_MK,
@@ -105,8 +105,18 @@ def test_accel_solves_equation_of_motion():
         np.testing.assert_allclose(h @ a, rhs, rtol=1e-10, atol=1e-9)
 
 
+def _ground_force(x, y, vx, vy, in_contact, x_touch, kx, ky, bx, by, mu):
+    """The engines' sequence: contact state, the law, then the limits."""
+    c, xt = update_contact(x, y, in_contact, x_touch)
+    if c == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    fx, fy = limit_force(*spring_damper(x, y, vx, vy, xt, kx, ky, bx, by), mu)
+    return fx, fy, c, xt
+
+
 def test_ground_force_law():
     k, d = 1e6, 1e4
+    ground_force = _ground_force
     # above ground: nothing, contact forgotten
     assert ground_force(0.3, 0.01, 0.0, 0.0, 1.0, 0.2, 1e5, k, 1e3, d, 0.0) == (0, 0, 0, 0)
     # first instant of contact stores the touchdown point

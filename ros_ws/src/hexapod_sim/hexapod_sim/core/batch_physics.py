@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from .body import LINKS, link_force
-from .contact import limit_force, update_contact
+from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .engine import W_BIAS, W_CS, W_FACTOR, W_FG, W_JAC, W_SIZE, W_W, leg_sample
 from .kinematics import foot_offset_cs, foot_velocity_cs
@@ -90,8 +90,8 @@ def block_prepare(X, PT, n, FH, WK, TR):  # type: ignore[no-untyped-def]
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
             vx, vy = x[v + b] + dvx, x[v + L + b] + dvy
             bx, by = pt[P_BGX * L + b], pt[P_BGY * L + b]
-            fx = -pt[P_KGX * L + b] * (xf - xt) - bx * vx
-            fy = -pt[P_KGY * L + b] * yf - by * vy
+            fx, fy = spring_damper(xf, yf, vx, vy, xt, pt[P_KGX * L + b], pt[P_KGY * L + b],
+                                   bx, by)
             h = pt[P_DT * L + b] if pt[P_IMPL * L + b] != 0.0 else 0.0
             if c == 0.0:  # in flight: no ground force, the plain solve (engine.prepare)
                 fx, fy, bx, by, h = 0.0, 0.0, 0.0, 0.0, 0.0

@@ -8,8 +8,9 @@ contact and forgotten when the foot leaves. The ground pushes, never pulls:
     F_y = max(0, -K_gy y_F - B_gy dy_F)
 
 An optional Coulomb limit |F_x| <= mu F_y applies when mu > 0 (the paper has none).
-The engine evaluates the damping terms at the end-of-step velocity (engine.py); this module
-gives the law at a given velocity.
+The engines evaluate the damping terms at the end-of-step velocity (engine.py); this module
+gives the law at a given velocity (:func:`spring_damper`), the contact state
+(:func:`update_contact`) and the limits (:func:`limit_force`).
 """
 from __future__ import annotations
 
@@ -42,15 +43,13 @@ def limit_force(fx, fy, mu):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def ground_force(x, y, vx, vy, in_contact, x_touch, kx, ky, bx, by,  # type: ignore[no-untyped-def]
-                 mu):
-    """Ground reaction on one foot at velocity (vx, vy) and the updated contact state.
+def spring_damper(x, y, vx, vy, x_touch, kx, ky, bx, by):  # type: ignore[no-untyped-def]
+    """The unlimited law of a foot in contact at (x, y) (m) moving at (vx, vy) (m/s), with
+    touchdown point x_touch (m): (F_x, F_y) in N, before :func:`limit_force`.
 
-    (x, y): foot position (m); in_contact (0/1) and x_touch (m): the stored contact state.
-    Returns (F_x, F_y, in_contact, x_touch) in N, N, -, m.
-    """
-    c, xt = update_contact(x, y, in_contact, x_touch)
-    if c == 0.0:
-        return 0.0, 0.0, 0.0, 0.0
-    fx, fy = limit_force(-kx * (x - xt) - bx * vx, -ky * y - by * vy, mu)
-    return fx, fy, c, xt
+    Both engines (engine.py, batch_physics.py) call it with the start-of-step velocity and
+    add the end-of-step damping term themselves."""
+    return -kx * (x - x_touch) - bx * vx, -ky * y - by * vy
+
+
+__all__ = ["limit_force", "spring_damper", "update_contact"]

@@ -23,14 +23,14 @@ import numpy as np
 from numba import njit
 
 from .body import body_forces
-from .contact import limit_force, update_contact
+from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .errors import DivergenceError
 from .gait import reference
 from .kinematics import foot_offset_cs, foot_velocity_cs
 from .layout import (C0, OBS_FIELDS, OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX,
                      P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0,
-                     STATE_SIZE, V0, X0, model_vector)
+                     STATE_SIZE, V0, X0, legs, model_vector)
 from .params import N_LEGS, HexapodParams
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
@@ -61,8 +61,7 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
     :func:`solve` finishes the step for a given torque; the observation of a tick and the
     first physics step after it share one call.
     """
-    q = s[Q0:Q0 + 24].reshape(N_LEGS, 4)
-    dq = s[V0:V0 + 24].reshape(N_LEGS, 4)
+    q, dq = legs(s)
     l1, l2 = P[P_L1], P[P_L2]
     h = P[P_DT] if P[P_IMPL] != 0.0 else 0.0
     body_forces(q, dq, P[P_HIPX:P_HIPX + N_LEGS], P[P_KBX], P[P_KBY], P[P_BBX], P[P_BBY], fh)
@@ -78,8 +77,7 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
             vx, vy = dq[i, 0] + dvx, dq[i, 1] + dvy
             bx, by = P[P_BGX], P[P_BGY]
-            fx = -P[P_KGX] * (x - xt) - bx * vx
-            fy = -P[P_KGY] * y - by * vy
+            fx, fy = spring_damper(x, y, vx, vy, xt, P[P_KGX], P[P_KGY], bx, by)
             factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH],
                                               P[P_MK], P[P_MF], P[P_G], bx, by, h)
         else:
@@ -264,8 +262,7 @@ def initial_state(p: HexapodParams) -> np.ndarray:
     no stored contacts (model.md "Gait and reference trajectories")."""
     ref = reference(p, 0.0)
     s = np.zeros(STATE_SIZE)
-    q = s[Q0:Q0 + 24].reshape(N_LEGS, 4)
-    dq = s[V0:V0 + 24].reshape(N_LEGS, 4)
+    q, dq = legs(s)
     q[:, 0:2] = ref.hip[0]
     dq[:, 0:2] = ref.hip_vel[0]
     q[:, 2:4] = ref.theta[0]

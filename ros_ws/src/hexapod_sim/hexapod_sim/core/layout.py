@@ -14,6 +14,7 @@ Observation ``obs`` (float64, shape (9, 6, 2)) at one control tick, rows :data:`
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .params import N_LEGS, HexapodParams
 
@@ -49,8 +50,9 @@ def model_vector(p: HexapodParams) -> np.ndarray:
     return P
 
 
-def legs(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Views (q, dq) of shape (6, 4) into a state vector."""
+@njit(cache=True)
+def legs(s):  # type: ignore[no-untyped-def]
+    """Views (q, dq) of shape (6, 4) into a state vector (the engine's, compiled)."""
     return s[Q0:Q0 + 24].reshape(N_LEGS, 4), s[V0:V0 + 24].reshape(N_LEGS, 4)
 
 
