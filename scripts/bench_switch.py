@@ -75,8 +75,11 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
     return switches, lost
 
 
-def on_time_split(bag: Path, at_tick: int) -> tuple[float, float]:
-    """(% on time before, after ``at_tick``) from the sim's status counters in ``bag``."""
+def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
+    """(% on time before, after ``at_tick``, median real-time factor before, after) from the
+    sim's status messages in ``bag``."""
+    import numpy as np
+
     from hexapod_metrics.core import cdr
     from hexapod_metrics.core.bag_reader import open_bag
     from hexapod_sim.core import topics as T
@@ -87,16 +90,23 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float]:
             for st in cdr.decode_diagnostic_array(bytes(data))[1]:
                 if st.name == "hexapod_sim":
                     v = dict(st.values)
-                    rows.append((int(v["tick"]), int(v["on_time_ticks"])))
+                    rows.append((int(v["tick"]), int(v["on_time_ticks"]),
+                                 float(v["real_time_factor"])))
     rows.sort()
     if not rows:
         raise RuntimeError(f"no status of the sim in {bag}")
     before = max((r for r in rows if r[0] <= at_tick), default=rows[0])
     last = rows[-1]
 
-    def pct(a: tuple[int, int], b: tuple[int, int]) -> float:
+    def pct(a: tuple[int, ...], b: tuple[int, ...]) -> float:
         return 100.0 * (b[1] - a[1]) / max(b[0] - a[0], 1)
-    return pct((0, 0), before), pct(before, last)
+
+    def rtf(part: list[tuple[int, int, float]]) -> float:
+        return float(np.median([r[2] for r in part])) if part else float("nan")
+    started = [r for r in rows if r[0] > 0]
+    return (pct((0, 0), before), pct(before, last),
+            rtf([r for r in started if r[0] <= at_tick]),
+            rtf([r for r in started if r[0] > at_tick]))
 
 
 def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
@@ -114,20 +124,27 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     duration = args.every * (switches + 1) if switches else args.duration
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
                        overrides=(f"sim.dt:={args.dt}", f"sim.control_period:={args.period}",
-                                  "sim.mode:=realtime"))
+                                  f"sim.mode:={args.mode}"))
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = rclpy.create_node("bench_switch", context=ctx, start_parameter_services=False)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     client = node.create_client(SetParameters, "/hexapod_sim/set_parameters")
+    from rosgraph_msgs.msg import Clock
+
+    clock_ns = [0]
+
+    def on_clock(msg: Clock) -> None:
+        clock_ns[0] = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+    node.create_subscription(Clock, "/clock", on_clock, 10)
     try:
         g.start("metrics", f"bag_path:={log_dir / 'bag'}")
         for name in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
             g.start(name)
         g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
                 f"wait_for:={ALL}")
-        g.wait_log("hexapod_sim", "realtime mode", timeout=180)
+        g.wait_log("hexapod_sim", f"{args.mode} mode", timeout=180)
         assert client.wait_for_service(timeout_sec=60), "no /hexapod_sim/set_parameters"
         start = time.monotonic()
         kill_tick = None
@@ -136,8 +153,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
                 ex.spin_once(timeout_sec=0.01)
             if kill_idle > 0:
                 g.procs["pd_p_controller"].kill()  # pd_pf is in charge: pd_p is idle
-            # realtime: the tick at that moment is about wall s since tick 0 / period
-            kill_tick = int(kill_idle / args.period)
+            kill_tick = int(round(clock_ns[0] * 1e-9 / args.period))  # the sim's, at the kill
         target = "pd_p"
         for i in range(switches):
             due = start + (i + 1) * args.every
@@ -167,6 +183,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
            "switches": len(done), "lost": lost}
     if kill_tick is not None:
         out["split"] = on_time_split(log_dir / "bag", kill_tick)
+        out["kill_tick"] = kill_tick
     return out
 
 
@@ -179,6 +196,8 @@ def main() -> int:
     ap.add_argument("--dt", type=float, default=1e-4, help="physics step (s)")
     ap.add_argument("--duration", type=float, default=10.0, help="s of the run without switches")
     ap.add_argument("--hog", action="store_true", help="one CPU hog beside the graph")
+    ap.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
+                    help="graph mode (lockstep: compare real-time factors)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
     ap.add_argument("--kill-idle", type=float, metavar="S",
                     help="compare runs without switches, one with the idle controller killed "
@@ -189,16 +208,21 @@ def main() -> int:
         hog = multiprocessing.Process(target=_hog, daemon=True)
         hog.start()
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
-          f"{', one CPU hog' if hog else ''}; realtime mode, {1 / args.period:g} Hz")
+          f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz")
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:
         with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
-            for i, (label, at) in enumerate((("no kill", 0.0), ("idle killed", args.kill_idle))):
-                r = run(args, 0, (base + i) % 101 + 1, Path(tmp) / f"run{i}", kill_idle=at)
-                b, a = r["split"] if i else on_time_split(
-                    Path(tmp) / f"run{i}" / "bag", int(args.kill_idle / args.period))
-                print(f"{label}: {r['ticks']} ticks, {r['missed']} missed; on time "
-                      f"{b:.2f} % before and {a:.2f} % after {args.kill_idle:g} s", flush=True)
+            base_run = run(args, 0, base % 101 + 1, Path(tmp) / "run0", kill_idle=0.0)
+            killed = run(args, 0, (base + 1) % 101 + 1, Path(tmp) / "run1",
+                         kill_idle=args.kill_idle)
+            at = killed["kill_tick"]
+            rows = (("no kill", base_run, on_time_split(Path(tmp) / "run0" / "bag", at)),
+                    ("idle killed", killed, killed["split"]))
+            for label, r, (b, a, rb, ra) in rows:
+                print(f"{label}: {r['ticks']} ticks, {r['missed']} missed; before / after tick "
+                      f"{at} (the kill, {args.kill_idle:g} wall s in): on time {b:.2f} % / "
+                      f"{a:.2f} %, real-time factor (median of the sim's statuses) "
+                      f"{rb:.3f} / {ra:.3f}", flush=True)
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return 0
     try:
