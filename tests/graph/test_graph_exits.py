@@ -173,6 +173,18 @@ def test_fallback_alone_exits_7(script, tmp_path):
     assert code == EXIT_CODES["fallback"] == 7, s.stderr()
     assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
     assert_uncommanded_cycles_are_labelled(s, "pd_p")
+    # the transition a ROS tool made is in the bag: the controller's status says it, at once
+    from hexapod_metrics.core import cdr
+    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_sim.core import topics as T
+
+    states = []
+    with open_bag(s.bag) as b:
+        for _, t, data in b.messages([T.STATUS]):
+            states += [(t, dict(st.values).get("lifecycle")) for st in
+                       cdr.decode_diagnostic_array(bytes(data))[1] if st.name == "pd_p_controller"]
+    labels = [lc for _, lc in states]
+    assert "active" in labels and "inactive" in labels[labels.index("active"):], states
 
 
 def test_killed_recorder_exits_4_and_stops_the_graph(script):

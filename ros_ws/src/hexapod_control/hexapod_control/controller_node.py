@@ -64,7 +64,12 @@ class ControllerNode(LifecycleNode):
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.autostart = declare_node_param(self, "autostart", True,
                                             "configure and activate at start")
-        self.guard.publish_status(self.get_name(), lambda: self.window.newest or 0)
+        # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
+        # /hexapod/status, so the bag records it with the sim time it happened at.
+        self.lifecycle = "unconfigured"
+        self.status_now = self.guard.publish_status(
+            self.get_name(), lambda: self.window.newest or 0,
+            extra=lambda: {"lifecycle": self.lifecycle})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
         self.js_codec = C.CODECS[T.JOINT_STATES]
@@ -122,7 +127,12 @@ class ControllerNode(LifecycleNode):
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
         self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
                       f"{tuple(float(g) for g in self.gains)}")
+        self._entered("inactive")
         return TransitionCallbackReturn.SUCCESS
+
+    def _entered(self, label: str) -> None:
+        self.lifecycle = label
+        self.status_now()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Enable the publisher and listen to the joint states."""
@@ -134,6 +144,7 @@ class ControllerNode(LifecycleNode):
         self.active = True
         self.log.info("active: answering the states that name "
                       f"'{self.arch}' as the controller in charge")
+        self._entered("active")
         return ret
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -144,6 +155,7 @@ class ControllerNode(LifecycleNode):
         if sub is not None:
             self.loop.unsubscribe(sub)
         self.log.info("inactive")
+        self._entered("inactive")
         return super().on_deactivate(state)
 
     def _teardown(self) -> None:
@@ -161,11 +173,15 @@ class ControllerNode(LifecycleNode):
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Remove publisher and subscriptions."""
         self._teardown()
+        self.log.info("unconfigured")
+        self._entered("unconfigured")
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Remove publisher and subscriptions."""
         self._teardown()
+        self.log.info("finalized")
+        self._entered("finalized")
         return TransitionCallbackReturn.SUCCESS
 
     # ------------------------------------------------------------------ per tick

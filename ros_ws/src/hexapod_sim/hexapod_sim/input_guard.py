@@ -13,7 +13,7 @@ given message) and names the publishers that are not nodes of this graph.
 from __future__ import annotations
 
 import struct
-from typing import Any
+from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
@@ -213,24 +213,28 @@ class InputGuard:
             text += "; authentication off"
         return text
 
-    def publish_status(self, name: str, stamp_ns: Any, period: float = 1.0) -> None:
+    def publish_status(self, name: str, stamp_ns: Any, period: float = 1.0,
+                       extra: Callable[[], dict[str, str]] | None = None) -> Callable[[], None]:
         """Publish this node's status (signed) on /hexapod/status every ``period`` wall s;
-        ``stamp_ns()`` gives the stamp. Call before creating the node's HotLoop (or
-        refresh it after)."""
+        ``stamp_ns()`` gives the stamp, ``extra()`` more key/values. Returns the function
+        that publishes one now (e.g. at a lifecycle transition). Call before creating the
+        node's HotLoop (or refresh it after)."""
         pub = self.node.create_publisher(DiagnosticArray, T.STATUS,
                                          C.TOPIC_QOS[T.STATUS].publisher())
         signer = self.signer(T.STATUS)
 
         def tick() -> None:
-            pub.publish(signer.sign(self.status(name, stamp_ns())))
+            pub.publish(signer.sign(self.status(name, stamp_ns(),
+                                                extra() if extra is not None else None)))
         self.node.create_timer(period, tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return tick
 
-    def status(self, name: str, stamp_ns: int) -> bytes:
-        """A signed /hexapod/status message of this node's inputs (for non-sim nodes)."""
+    def status(self, name: str, stamp_ns: int, extra: dict[str, str] | None = None) -> bytes:
+        """A /hexapod/status message of this node's inputs (for non-sim nodes)."""
         self.refresh()
         level = "warn" if self.drops.total or self.key is None else "ok"
         msg = C.diagnostic_array(max(0, stamp_ns), [C.Status(
-            name, level, self.drops.summary(), self.values())])
+            name, level, self.drops.summary(), {**self.values(), **(extra or {})})])
         return serialize_message(msg)
 
 
