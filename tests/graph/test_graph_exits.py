@@ -18,7 +18,7 @@ import pytest
 
 from hexapod_metrics.graph_launcher import EXIT_CODES
 
-from .conftest import call, hexapod_cli, next_domain_id, ros_client
+from .conftest import call, hexapod_cli, next_domain_id, ros_client, sim_summary
 
 ROOT = Path(__file__).resolve().parents[2]
 #: conftest.FAST_TIMING as run_graph.sh options (behaviour, not the paper's numbers)
@@ -236,6 +236,29 @@ def test_kill_9_of_the_launcher_leaves_no_node_running(script):
     assert not [n for n, p in nodes.items() if alive(p)]
     # they stopped as on SIGTERM: the recorder closed its bag
     assert (s.bag / "metadata.yaml").exists() and (s.bag / "indices.json").exists()
+
+
+def test_a_killed_idle_controller_leaves_the_graph_within_its_lease(make_graph):
+    # SIGKILL says no goodbye: the others drop the participant when its lease (5 s in the
+    # graph's profile; Fast DDS's default is 20 s) runs out, and stop sending it samples.
+    g = make_graph()
+    for n in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
+        g.start(n)
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller",
+            "run.duration:=6.0", "stop_at_end:=true")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    with ros_client(g.domain_id) as node:
+        end = time.monotonic() + 60
+        while "pd_p_controller" not in node.get_node_names() and time.monotonic() < end:
+            time.sleep(0.05)
+        g.procs["pd_p_controller"].kill()  # pd_pf is in charge: pd_p is idle
+        killed = time.monotonic()
+        while "pd_p_controller" in node.get_node_names() and time.monotonic() < killed + 15:
+            time.sleep(0.05)
+        assert "pd_p_controller" not in node.get_node_names(), "still in the graph after 15 s"
+    assert g.wait_exit("hexapod_sim", 600) == 0
+    summary = sim_summary(g.log("hexapod_sim"))
+    assert summary["missed"] == 0 and "0 fallback episodes" in g.log("hexapod_sim")
 
 
 def test_fast_dds_profile_is_private_to_the_graph(make_graph, tmp_path):

@@ -20,7 +20,10 @@ from pathlib import Path
 #: lost samples then wait for the next heartbeat: up to 3 s, which stalled the loop for
 #: 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer NACKs at
 #: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
-#: loopback interface.
+#: loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's default
+#: is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the others
+#: within 5 s, so the graph stops sending it samples (a dead reader's shared-memory port
+#: holds buffers of its writers until then).
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -44,6 +47,12 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
           <transport_id>hexapod_udp</transport_id>
         </userTransports>
         <useBuiltinTransports>false</useBuiltinTransports>
+        <builtin>
+          <discovery_config>
+            <leaseDuration><sec>5</sec><nanosec>0</nanosec></leaseDuration>
+            <leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>
+          </discovery_config>
+        </builtin>
       </rtps>
     </participant>
     <data_writer profile_name="hexapod_writer" is_default_profile="true">
