@@ -49,7 +49,7 @@ def _peak_rss_mb() -> float:
 
 def write_bag(path: Path, n: int, compression: str) -> float:
     """Write the benchmark bag; return messages per second."""
-    from hexapod_metrics.core.bag_writer import BagWriter
+    from hexapod_metrics.bag import BagWriter
 
     rng = np.random.default_rng(0)
     t0 = time.perf_counter()
@@ -73,7 +73,7 @@ def write_graph_bag(path: Path, seconds: float) -> int:
     """A graph-format bag of a ``seconds`` run at 1 kHz control (PD-P&F, switch to PD-P
     halfway)."""
     from hexapod_control.core.closed_loop import run
-    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_metrics.bag import open_bag
     from hexapod_metrics.core.recording import write_run_bag
     from hexapod_sim.core.params import load_params
 
@@ -85,7 +85,7 @@ def write_graph_bag(path: Path, seconds: float) -> int:
 
 def child(mode: str, bag: Path, subset: int) -> dict[str, float]:
     """Run one measurement in this (child) process."""
-    from hexapod_metrics.core.bag_reader import (
+    from hexapod_metrics.bag import (
         iter_joint_state_blocks,
         open_bag,
         read_joint_state_arrays,

@@ -87,7 +87,7 @@ class Client:
 def main() -> int:
     _reexec_in_env()
     from hexapod_metrics.cmd_graph import GraphProcesses
-    from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+    from hexapod_metrics.bag import open_bag, read_joint_state_arrays
     from hexapod_sim.core import topics as T
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

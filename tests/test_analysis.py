@@ -9,8 +9,8 @@ import pytest
 
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core.analysis import analyze_bag
-from hexapod_metrics.core.bag_writer import BagWriter
-from hexapod_metrics.core.errors import BagReadError
+from hexapod_metrics.bag import BagWriter
+from hexapod_metrics.bag import BagReadError
 from hexapod_metrics.core.indices import INDEX_NAMES
 from hexapod_metrics.core.recording import write_run_bag
 from hexapod_metrics.core.simulate import simulate

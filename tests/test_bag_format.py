@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 import yaml
 
-from hexapod_metrics.core import cdr
-from hexapod_metrics.core.bag_reader import (
+from hexapod_sim.core import cdr
+from hexapod_metrics.bag import (
     iter_joint_state_blocks,
     open_bag,
     read_joint_state_arrays,
     read_joint_state_topics,
 )
-from hexapod_metrics.core.bag_writer import BagWriter, QosProfile, qos_yaml
-from hexapod_metrics.core.errors import BagReadError, BagWriteError
-from hexapod_metrics.core.msgdefs import MESSAGE_TYPES, TYPE_JOINT_STATE
+from hexapod_metrics.bag import BagWriter, QosProfile, qos_yaml
+from hexapod_metrics.bag import BagReadError, BagWriteError
+from hexapod_metrics.bag.msgdefs import MESSAGE_TYPES, TYPE_JOINT_STATE
 
 LEGS = [f'leg{i}_{j}' for i in range(1, 7) for j in ('hip', 'knee')]
 FEET = [f'leg{i}_foot_{a}' for i in range(1, 7) for a in ('x', 'y')]
@@ -219,7 +219,7 @@ def test_qos_string_is_yaml_cpp_dump() -> None:
 _KILLED_WRITER = textwrap.dedent('''
     import sys
     import numpy as np
-    from hexapod_metrics.core.bag_writer import BagWriter
+    from hexapod_metrics.bag import BagWriter
     names = [f'j{i}' for i in range(12)]
     w = BagWriter(sys.argv[1], chunk_size=32 * 1024, flush_interval_s=60.0).open()
     w.write_string('/hexapod/active_controller', 0, 'pd_pf')
@@ -468,84 +468,6 @@ def test_writer_refuses_bad_input(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- CDR
 
 
-def test_cdr_equals_rclpy_serialize_message() -> None:
-    try:
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-        from rclpy.serialization import serialize_message
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import String
-    except ImportError as err:
-        pytest.skip(f'rclpy or its messages are not importable ({err}); rclpy equality unchecked')
-    rng = np.random.default_rng(11)
-
-    def same(ours: bytes, theirs: bytes, msgtype: str) -> None:
-        # rclpy leaves alignment padding uninitialised; ours is zero: compare the rest
-        assert len(ours) == len(theirs)
-        pad = np.frombuffer(cdr.cdr_padding_mask(theirs, msgtype), np.uint8).astype(bool)
-        a, b = np.frombuffer(ours, np.uint8), np.frombuffer(theirs, np.uint8)
-        np.testing.assert_array_equal(a[~pad], b[~pad])
-        assert not a[pad].any()
-
-    for _ in range(100):
-        k = int(rng.integers(0, 13))
-        names = [f'j{"x" * int(rng.integers(0, 9))}{i}' for i in range(k)]
-        frame = 'f' * int(rng.integers(0, 7))
-        arrays = [rng.standard_normal(int(rng.choice([0, k]))) for _ in range(3)]
-        stamp = int(rng.integers(0, 2**31)) * 1_000_000_000 + int(rng.integers(0, 1_000_000_000))
-        msg = JointState(name=names, position=arrays[0].tolist(), velocity=arrays[1].tolist(),
-                         effort=arrays[2].tolist())
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-        msg.header.frame_id = frame
-        theirs = serialize_message(msg)
-        ours = cdr.encode_joint_state(stamp, names, *arrays, frame_id=frame)
-        same(ours, theirs, TYPE_JOINT_STATE)
-        decoded = cdr.decode_joint_state(theirs)
-        assert (decoded.stamp_ns, decoded.names, decoded.frame_id) == (stamp, tuple(names), frame)
-        text = 'ü' * int(rng.integers(0, 5)) + 'pd_pf'[: int(rng.integers(0, 6))]
-        same(cdr.encode_string(text), serialize_message(String(data=text)), 'std_msgs/msg/String')
-        clock = Clock()
-        clock.clock.sec, clock.clock.nanosec = divmod(stamp, 1_000_000_000)
-        same(cdr.encode_clock(stamp), serialize_message(clock), 'rosgraph_msgs/msg/Clock')
-        statuses = _status(int(rng.integers(0, 50)))[: int(rng.integers(0, 2))]
-        array = DiagnosticArray(status=[
-            DiagnosticStatus(level=bytes([s.level]), name=s.name, message=s.message,
-                             hardware_id=s.hardware_id,
-                             values=[KeyValue(key=a, value=b) for a, b in s.values])
-            for s in statuses
-        ])
-        array.header.stamp.sec, array.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-        same(cdr.encode_diagnostic_array(stamp, statuses), serialize_message(array),
-             'diagnostic_msgs/msg/DiagnosticArray')
-
-
-def test_fast_decoder_equals_slow_decoder() -> None:
-    rng = np.random.default_rng(5)
-    messages = []
-    for i in range(2000):
-        frame = 'base' if i % 97 else 'base_link'  # a different layout now and then
-        values = rng.standard_normal((3, 12))
-        effort = values[2] if i % 101 else []  # an empty array: the per-message path
-        raw = bytearray(cdr.encode_joint_state(i * 7, LEGS, values[0], values[1], effort, frame))
-        pad = np.frombuffer(cdr.cdr_padding_mask(bytes(raw), TYPE_JOINT_STATE), np.uint8)
-        for at in np.flatnonzero(pad):  # garbage padding, as rclpy leaves it
-            raw[at] = int(rng.integers(0, 256))
-        messages.append(bytes(raw))
-    fast = cdr.decode_joint_state_batch(messages)
-    for i in range(0, 2000, 7):
-        slow = cdr.decode_joint_state(messages[i])
-        assert fast.stamps[i] == slow.stamp_ns
-        np.testing.assert_array_equal(fast.position[i], slow.position)
-        np.testing.assert_array_equal(fast.velocity[i], slow.velocity)
-        if len(slow.effort):
-            np.testing.assert_array_equal(fast.effort[i], slow.effort)
-        else:
-            assert np.isnan(fast.effort[i]).all()
-    with pytest.raises(BagReadError, match='joint names changed'):
-        swapped = cdr.encode_joint_state(0, LEGS[::-1], *rng.standard_normal((3, 12)))
-        cdr.decode_joint_state_batch([*messages, swapped])
-
-
 def test_streaming_blocks_cover_the_bag(bag_dir: tuple[Path, tuple[np.ndarray, ...]]) -> None:
     path, (pos, _, _) = bag_dir
     with open_bag(path) as bag:
@@ -554,8 +476,10 @@ def test_streaming_blocks_cover_the_bag(bag_dir: tuple[Path, tuple[np.ndarray, .
     np.testing.assert_array_equal(np.concatenate([b.position for b in blocks]), pos)
 
 
-@pytest.mark.parametrize('module', ['bag', 'bag_reader', 'bag_writer', 'cdr', 'msgdefs'])
+@pytest.mark.parametrize('module', [
+    'hexapod_metrics.bag', 'hexapod_metrics.bag.reader', 'hexapod_metrics.bag.writer',
+    'hexapod_sim.core.cdr', 'hexapod_metrics.bag.msgdefs'])
 def test_bag_modules_import_without_rclpy(module: str) -> None:
-    code = f'import sys, hexapod_metrics.core.{module}; print("rclpy" in sys.modules)'
+    code = f'import sys, {module}; print("rclpy" in sys.modules)'
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == 'False'

@@ -9,8 +9,8 @@ import pytest
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core.analysis import analyze_bag
 from hexapod_metrics.core.bag_params import DEFAULTS, FROM_MCAP, bag_params
-from hexapod_metrics.core.bag_reader import open_bag
-from hexapod_metrics.core.errors import BagReadError
+from hexapod_metrics.bag import open_bag
+from hexapod_metrics.bag import BagReadError
 from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
 from hexapod_metrics.core.recording import PARAMS_KEY, write_run_bag
 from hexapod_metrics.core.simulate import simulate
@@ -169,7 +169,7 @@ def test_the_mcap_library_finds_the_records_through_the_summary(changed_bag):
 
 
 def test_a_bag_without_records_says_it_uses_the_defaults(tmp_path):
-    from hexapod_metrics.core.bag_writer import BagWriter
+    from hexapod_metrics.bag import BagWriter
 
     with BagWriter(tmp_path / "bare") as w:
         w.add_topic(T.JOINT_STATES, "sensor_msgs/msg/JointState")

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import yaml
 
-from hexapod_metrics.core import cdr
-from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
-from hexapod_metrics.core.bag_writer import RESERVE_NAME, BagWriter
-from hexapod_metrics.core.errors import BagReadError, BagStorageError, BagWriteError
+from hexapod_sim.core import cdr
+from hexapod_metrics.bag import open_bag, read_joint_state_arrays
+from hexapod_metrics.bag import RESERVE_NAME, BagWriter
+from hexapod_metrics.bag import BagReadError, BagStorageError, BagWriteError
 from hexapod_metrics.core.log_times import ControllerLogTimes, marker_array_stamp
 
 from graph.small_disk import small_disk
@@ -93,8 +93,8 @@ def test_a_dead_tick_topic_stops_holding_the_chunks(tmp_path: Path) -> None:
 _KILLED = textwrap.dedent("""
     import sys
     import numpy as np
-    from hexapod_metrics.core import cdr
-    from hexapod_metrics.core.bag_writer import BagWriter
+    from hexapod_sim.core import cdr
+    from hexapod_metrics.bag import BagWriter
     names = [f'j{i}' for i in range(12)]
     w = BagWriter(sys.argv[1], sync_topics=('/a', '/b'), chunk_size=16 * 1024).open()
     w.add_metadata('params', {'ground.scale': '2.0'})
@@ -212,28 +212,8 @@ def test_marker_array_stamp() -> None:
     assert marker_array_stamp(data) == 2_000_000_005
 
 
-@pytest.mark.parametrize(("text", "pad"), [("pd_p", 3), ("pd_pf", 2), ("abcdef", 1)])
-def test_decoder_accepts_dds_padding(text: str, pad: int) -> None:
-    data = cdr.encode_string(text)
-    assert (len(data) + pad) % 4 == 0  # what DDS appends to reach a multiple of 4
-    assert cdr.decode_string(data + bytes(pad)) == text
-    status = cdr.DiagnosticStatus("n", "m", "h", 2, (("k", text),))
-    arr = cdr.encode_diagnostic_array(7, [status])
-    assert len(arr) % 4 and cdr.decode_diagnostic_array(arr + bytes(-len(arr) % 4)) == (
-        7, [status])
-
-
-def test_decoder_rejects_what_is_not_padding() -> None:
-    data = cdr.encode_string("pd_pf")
-    with pytest.raises(BagReadError, match="4 unexpected trailing bytes"):
-        cdr.decode_string(data + bytes(4))
-    with pytest.raises(BagReadError, match="unexpected trailing bytes"):
-        cdr.decode_string(data + b"\x01")
-
-
-
 def test_message_definitions_come_from_the_installed_msg_files() -> None:
-    from hexapod_metrics.core import msgdefs
+    from hexapod_metrics.bag import msgdefs
 
     js = msgdefs.MESSAGE_TYPES["sensor_msgs/msg/JointState"]
     assert js.definition.startswith(msgdefs._msg_text("sensor_msgs/JointState"))

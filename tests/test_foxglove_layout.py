@@ -30,7 +30,7 @@ def test_the_layout_reads_only_recorded_topics_and_plots_what_the_issue_asks():
 def test_an_in_process_bag_has_every_topic_the_plots_read(tmp_path):
     """A `hexapod simulate` bag: everything but the graph-only markers and sim status."""
     from hexapod_control.core.closed_loop import run
-    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_metrics.bag import open_bag
     from hexapod_sim.core.params import load_params
 
     doc = json.loads((ROOT / LAYOUT_FILE).read_text(encoding="utf-8"))

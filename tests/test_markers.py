@@ -12,7 +12,7 @@ def test_markers_of_a_run_round_trip_through_a_bag(tmp_path):
     from rosbags.highlevel import AnyReader
 
     from hexapod_control.core.closed_loop import run
-    from hexapod_metrics.core.bag_writer import BagWriter
+    from hexapod_metrics.bag import BagWriter
     from hexapod_metrics.core.figure import stick_figure
     from hexapod_metrics.marker_node import markers
     from hexapod_sim.core.params import load_params

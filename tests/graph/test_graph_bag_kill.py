@@ -14,7 +14,7 @@ from __future__ import annotations
 import signal
 
 from hexapod_metrics.core.analysis import analyze_bag
-from hexapod_metrics.core.bag_reader import open_bag
+from hexapod_metrics.bag import open_bag
 from hexapod_sim.core import topics as T
 
 from .bag_checks import check_indexed_ordered_bag, mcap_size

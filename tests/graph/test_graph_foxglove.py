@@ -9,8 +9,8 @@ from pathlib import Path
 
 
 from hexapod_metrics.core.bag_params import read_records
-from hexapod_metrics.core.bag_reader import open_bag
-from hexapod_metrics.core.msgdefs import lookup
+from hexapod_metrics.bag import open_bag
+from hexapod_metrics.bag.msgdefs import lookup
 from hexapod_metrics.foxglove_layout import LAYOUT_FILE, layout_topics
 from hexapod_sim.core import topics as T
 

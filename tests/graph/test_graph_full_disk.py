@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 
-from hexapod_metrics.core.bag_reader import open_bag
+from hexapod_metrics.bag import open_bag
 from hexapod_metrics.metrics_node import EXIT_RECORDING_FAILED
 
 from .small_disk import small_disk

@@ -26,8 +26,8 @@ import pytest
 
 from hexapod_control.core.closed_loop import run
 from hexapod_control.core.controllers import control_law, controller_code, gain_vector
+from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_metrics.core.bag_params import bag_params
-from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
 from hexapod_sim import conversions as C
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core import topics as T
@@ -157,7 +157,7 @@ def _assert_genuine_realtime(rec: dict, period: float) -> None:
 
 
 def _status_values(rec: dict, node: str) -> dict[str, str]:
-    from hexapod_metrics.core import cdr
+    from hexapod_sim.core import cdr
 
     last = {}
     for data in rec["status"]:

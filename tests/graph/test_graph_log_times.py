@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from hexapod_metrics.core import cdr
+from hexapod_sim.core import cdr
 from hexapod_sim.core import topics as T
 
 from .bag_checks import MS, check_indexed_ordered_bag, read_with_rosbags

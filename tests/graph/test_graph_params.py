@@ -11,7 +11,7 @@ import pytest
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core.analysis import analyze_bag
 from hexapod_metrics.core.bag_params import FROM_MCAP, read_records
-from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
 from hexapod_metrics.core.recording import RECORDS_KEY
 from hexapod_sim.core import topics as T

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from hexapod_control.core.closed_loop import run
-from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import load_params
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hexapod_metrics.core.bag_reader import open_bag, read_joint_state_arrays
+from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexapod_metrics.core.bag_reader import open_bag
+from hexapod_metrics.bag import open_bag
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 

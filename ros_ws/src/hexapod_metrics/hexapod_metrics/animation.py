@@ -16,8 +16,8 @@ from hexapod_sim.core import topics as T
 
 from .core.analysis import label_ticks, controller_changes
 from .core.bag_params import bag_params
-from .core.bag_reader import iter_joint_state_blocks, open_bag
-from .core.errors import BagReadError
+from .bag import iter_joint_state_blocks, open_bag
+from .bag import BagReadError
 from .core.figure import FORCE_SCALE, stick_figure
 from .plots import label
 

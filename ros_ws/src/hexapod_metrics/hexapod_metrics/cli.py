@@ -17,7 +17,7 @@ import numpy as np
 from hexapod_sim.core.errors import HexapodError
 
 from .cli_args import OneLineParser, param_value, params_arguments, params_from_args, parse_value
-from .core.errors import BagError
+from .bag import BagError
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.

@@ -30,7 +30,7 @@ from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
 from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import declare_node_param
 
-from .core.msgdefs import lookup
+from .bag.msgdefs import lookup
 from .core.recording import TOPICS
 
 _STAMP = struct.Struct("<iI")

@@ -4,7 +4,7 @@ Recording: every topic is subscribed raw (serialized bytes) with reliable QoS an
 queues; each message is authenticated and checked (``hexapod_sim.input_guard``: a dropped
 one is counted and reported, never recorded) and its payload, without the tag, written as
 it comes to a rosbag2/MCAP bag
-(:class:`~hexapod_metrics.core.bag_writer.BagWriter`) at ``bag_path`` (default
+(:class:`~hexapod_metrics.bag.BagWriter`) at ``bag_path`` (default
 ``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
 (:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
 transient-local). Parameters: every node's records from ``/hexapod/parameters`` (start
@@ -61,7 +61,7 @@ from rclpy.serialization import deserialize_message
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.errors import CdrError, HexapodError, ParameterError
 from hexapod_sim.core.msg_auth import AuthError
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.core.params import CONTROLLERS
@@ -70,9 +70,9 @@ from hexapod_sim.input_guard import InputGuard
 from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
-from .core import cdr
-from .core.bag_writer import BagWriter
-from .core.errors import BagError, BagReadError, BagStorageError
+from hexapod_sim.core import cdr
+from .bag import BagWriter
+from .bag import BagError, BagStorageError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
 from .core.log_times import ControllerLogTimes, marker_array_stamp
 from .core.recording import TICK_TOPICS, TOPICS, ParamRecorder, indices_status
@@ -300,7 +300,7 @@ class MetricsNode(Node):
                 try:
                     stamp, _ = cdr.decode_diagnostic_array(payload)
                     self.window.check(stamp)
-                except BagReadError as err:
+                except CdrError as err:
                     g.drop(topic, M.UNDECODABLE, str(err))
                     return
                 except M.Dropped as d:

@@ -3,12 +3,11 @@
 Two ways across the boundary:
 
 * typed messages for the low-rate topics (status, indices, active controller, ...):
-  :func:`joint_state`, :func:`columns`, :func:`clock`, :func:`diagnostic_array`, ...
-* serialized CDR bytes for the per-tick topics: :class:`JointStateCodec` encodes and decodes
-  ``sensor_msgs/JointState`` straight from and into float arrays (a few microseconds,
-  against ~15 us for ``serialize_message`` and ~30 us for ``deserialize_message`` per
-  message here), and the nodes publish and take raw bytes. The bytes are those rclpy
-  produces (XCDR1 little endian, padding zeroed); tests compare them.
+  :func:`joint_state`, :func:`clock`, :func:`diagnostic_array`, ...
+* serialized CDR bytes for the per-tick topics, through the one ROS-free codec
+  (``core/cdr.py``, re-exported here: :class:`JointStateCodec`, :data:`CODECS`, ...): the
+  nodes publish and take raw bytes, the very bytes rclpy produces (XCDR1 little endian,
+  padding zeroed); tests compare them.
 
 The QoS of each contract topic is defined here too (:data:`TOPIC_QOS`), so that publishers,
 subscribers and the recorder agree. Stamps are integer nanoseconds of simulated time
@@ -16,9 +15,7 @@ subscribers and the recorder agree. Stamps are integer nanoseconds of simulated 
 """
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -31,11 +28,17 @@ from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
 from .core import topics as T
-
-NS = 1_000_000_000
-ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR little endian, what rclpy writes first
-_U32 = struct.Struct("<I")
-_STAMP = struct.Struct("<iI")
+from .core.cdr import (
+    CODECS,
+    ENCAPSULATION,
+    NS,
+    JointStateCodec,
+    JointStateView,
+    decode_stamp,
+    decode_string,
+    encode_clock,
+    encode_string,
+)
 
 # --------------------------------------------------------------------------- QoS
 
@@ -134,12 +137,6 @@ def joint_state(cols: T.Columns, stamp_ns: int, frame_id: str = "") -> JointStat
     return msg
 
 
-def columns(msg: JointState) -> T.Columns:
-    """Columns of a JointState (arrays copied out of the message)."""
-    return T.Columns(tuple(msg.name), np.array(msg.position, dtype=float),
-                     np.array(msg.velocity, dtype=float), np.array(msg.effort, dtype=float))
-
-
 def clock(stamp_ns: int) -> Clock:
     """A rosgraph_msgs/Clock."""
     return Clock(clock=to_time(stamp_ns))
@@ -188,174 +185,8 @@ def statuses(msg: DiagnosticArray) -> list[Status]:
 
 
 # --------------------------------------------------------------------------- raw CDR
-
-
-def _cdr_string(out: bytearray, text: str) -> None:
-    out += b"\x00" * (-(len(out) - 4) % 4)
-    raw = text.encode()
-    out += _U32.pack(len(raw) + 1)
-    out += raw
-    out += b"\x00"
-
-
-def encode_clock(stamp_ns: int) -> bytes:
-    """Serialized rosgraph_msgs/Clock."""
-    return ENCAPSULATION + _STAMP.pack(*divmod(int(stamp_ns), NS))
-
-
-def decode_stamp(data: bytes) -> int:
-    """Stamp (ns) of a serialized Clock or of any message starting with a std_msgs/Header."""
-    sec, nsec = _STAMP.unpack_from(data, 4)
-    return sec * NS + nsec
-
-
-def encode_string(text: str) -> bytes:
-    """Serialized std_msgs/String."""
-    out = bytearray(ENCAPSULATION)
-    _cdr_string(out, text)
-    return bytes(out)
-
-
-def decode_string(data: bytes) -> str:
-    """Text of a serialized std_msgs/String."""
-    (n,) = _U32.unpack_from(data, 4)
-    return bytes(data[8:8 + n - 1]).decode()
-
-
-class JointStateLayout(NamedTuple):
-    """Constant bytes and value offsets of a JointState with given frame_id and names."""
-
-    head: bytes        # frame_id, names and position count: from the stamp to the values
-    gap: tuple[bytes, bytes]  # count + alignment before velocity and before effort
-    offsets: tuple[int, int, int]    # byte offsets of the first value of each array
-    size: int
-
-
-@lru_cache(maxsize=64)
-def joint_state_layout(frame_id: str, names: tuple[str, ...]) -> JointStateLayout:
-    """Layout of a JointState whose three arrays have one value per name."""
-    out = bytearray(12)  # encapsulation + stamp
-    _cdr_string(out, frame_id)
-    out += b"\x00" * (-(len(out) - 4) % 4)
-    out += _U32.pack(len(names))
-    for name in names:
-        _cdr_string(out, name)
-    pos = len(out)
-    gaps, offsets = [], []
-    for _ in range(3):
-        gap = bytearray(b"\x00" * (-(pos - 4) % 4))  # CDR aligns relative to byte 4
-        gap += _U32.pack(len(names))
-        gap += b"\x00" * (-(pos + len(gap) - 4) % 8)
-        pos += len(gap)
-        gaps.append(bytes(gap))
-        offsets.append(pos)
-        pos += 8 * len(names)
-    return JointStateLayout(bytes(out[12:]) + gaps[0], (gaps[1], gaps[2]),
-                            (offsets[0], offsets[1], offsets[2]), pos)
-
-
-def _parse_joint_state(data: bytes) -> tuple[int, str, tuple[str, ...], list[np.ndarray]]:
-    """Generic (slow) parse of a serialized JointState, ignoring padding bytes."""
-    try:
-        pos = 4
-        sec, nsec = _STAMP.unpack_from(data, pos)
-        pos += 8
-
-        def text() -> str:
-            nonlocal pos
-            pos += -(pos - 4) % 4
-            (n,) = _U32.unpack_from(data, pos)
-            s = bytes(data[pos + 4:pos + 4 + max(n - 1, 0)]).decode()
-            pos += 4 + n
-            return s
-
-        frame_id = text()
-        pos += -(pos - 4) % 4
-        (count,) = _U32.unpack_from(data, pos)
-        pos += 4
-        names = tuple(text() for _ in range(count))
-        arrays = []
-        for _ in range(3):
-            pos += -(pos - 4) % 4
-            (n,) = _U32.unpack_from(data, pos)
-            pos += 4
-            if n:
-                pos += -(pos - 4) % 8
-            if pos + 8 * n > len(data):
-                raise ValueError("array runs past the end")
-            arrays.append(np.frombuffer(data, "<f8", n, pos))
-            pos += 8 * n
-    except (struct.error, UnicodeDecodeError, ValueError) as err:
-        raise ValueError(f"not a serialized JointState: {err}") from err
-    return sec * NS + nsec, frame_id, names, arrays
-
-
-class JointStateView(NamedTuple):
-    """A decoded JointState: stamp (ns), frame_id and read-only arrays into the message."""
-
-    stamp_ns: int
-    frame_id: str
-    position: np.ndarray
-    velocity: np.ndarray
-    effort: np.ndarray
-
-
-class JointStateCodec:
-    """Encode/decode serialized JointStates of one topic (fixed joint names) without rclpy.
-
-    Decoding compares the message's size and constant bytes (names, counts) with the
-    layout expected for its frame_id length; a message that differs (say, non-zero
-    padding from another serializer) takes a generic parse, and one that does not carry
-    this topic's joints with all three arrays filled raises ValueError.
-    """
-
-    def __init__(self, names: Sequence[str]) -> None:
-        self.names = tuple(names)
-        self.n = len(self.names)
-        self._by_frame_len: dict[int, JointStateLayout] = {}
-
-    def encode(self, stamp_ns: int, frame_id: str, position: np.ndarray, velocity: np.ndarray,
-               effort: np.ndarray) -> bytes:
-        """Serialized JointState (float64 arrays of length ``len(names)``)."""
-        lay = joint_state_layout(frame_id, self.names)
-        g1, g2 = lay.gap
-        return b"".join((ENCAPSULATION, _STAMP.pack(*divmod(int(stamp_ns), NS)), lay.head,
-                         np.ascontiguousarray(position, dtype="<f8").tobytes(),
-                         g1, np.ascontiguousarray(velocity, dtype="<f8").tobytes(),
-                         g2, np.ascontiguousarray(effort, dtype="<f8").tobytes()))
-
-    def decode(self, data: bytes) -> JointStateView:
-        """Stamp, frame_id and arrays (views into ``data``) of a serialized JointState."""
-        (flen,) = _U32.unpack_from(data, 12)
-        frame_id = bytes(data[16:16 + flen - 1]).decode() if flen else ""
-        lay = self._by_frame_len.get(flen)
-        if lay is None:
-            lay = self._by_frame_len[flen] = joint_state_layout(frame_id, self.names)
-        o0, o1, o2 = lay.offsets
-        n = self.n
-        start = 16 + flen  # the frame_id's bytes vary; the rest up to the values does not
-        if (len(data) == lay.size and data[start:o0] == lay.head[start - 12:]
-                and data[o1 - len(lay.gap[0]):o1] == lay.gap[0]
-                and data[o2 - len(lay.gap[1]):o2] == lay.gap[1]):
-            sec, nsec = _STAMP.unpack_from(data, 4)
-            return JointStateView(sec * NS + nsec, frame_id, np.frombuffer(data, "<f8", n, o0),
-                                  np.frombuffer(data, "<f8", n, o1),
-                                  np.frombuffer(data, "<f8", n, o2))
-        stamp, frame_id, names, arrays = _parse_joint_state(data)
-        if names != self.names or any(len(a) != n for a in arrays):
-            raise ValueError(f"JointState does not carry the {n} joints {self.names[0]}.."
-                             f"{self.names[-1]} with all three arrays filled")
-        return JointStateView(stamp, frame_id, arrays[0], arrays[1], arrays[2])
-
-
-#: One codec per JointState topic of the contract.
-CODECS: dict[str, JointStateCodec] = {
-    T.JOINT_STATES: JointStateCodec(T.JOINT_NAMES),
-    T.FOOT_FORCES: JointStateCodec(T.FOOT_NAMES),
-    T.HIP_STATES: JointStateCodec(T.HIP_NAMES),
-    T.REFERENCE: JointStateCodec(T.REFERENCE_NAMES),
-    T.JOINT_COMMANDS: JointStateCodec(T.JOINT_NAMES),
-}
+# The per-tick topics travel as raw CDR bytes, through the project's one codec
+# (core/cdr.py, ROS-free, shared with the bag code): CODECS, encode_clock, decode_stamp, ...
 
 
 def fill_obs(obs: np.ndarray, topic: str, position: np.ndarray, velocity: np.ndarray,
@@ -370,8 +201,8 @@ def fill_obs(obs: np.ndarray, topic: str, position: np.ndarray, velocity: np.nda
 
 __all__ = [
     "CODECS", "CONTROL_DEPTH", "ENCAPSULATION", "HISTORY_DEPTH", "JointStateCodec",
-    "JointStateLayout", "JointStateView", "LEVELS", "NS", "RECORD_DEPTH", "Status", "TOPIC_QOS",
-    "TopicQos", "clock", "columns", "decode_stamp", "decode_string", "diagnostic_array",
+    "JointStateView", "LEVELS", "NS", "RECORD_DEPTH", "Status", "TOPIC_QOS",
+    "TopicQos", "clock", "decode_stamp", "decode_string", "diagnostic_array",
     "encode_clock", "encode_string", "fill_obs", "from_time", "joint_state",
-    "joint_state_layout", "statuses", "string", "tick_of", "to_time",
+    "statuses", "string", "tick_of", "to_time",
 ]

@@ -25,9 +25,10 @@ from hexapod_sim.core.param_log import ParamTimeline
 from hexapod_sim.core.params import HexapodParams
 
 from .bag_params import bag_params
-from .bag_reader import Bag, iter_joint_state_blocks, open_bag
-from .cdr import decode_diagnostic_array
-from .errors import BagReadError
+from ..bag import Bag, iter_joint_state_blocks, open_bag
+from hexapod_sim.core.cdr import decode_diagnostic_array
+from hexapod_sim.core.errors import CdrError
+from ..bag import BagReadError
 from .indices import Indices, WindowSums, sums_from_obs
 from .recording import status_indices
 
@@ -185,7 +186,11 @@ class _Buffer:
 def _online_records(raw: bytes) -> list[tuple[int, str, Indices]]:
     """The per-cycle indices of one /hexapod/indices message."""
     out = []
-    for st in decode_diagnostic_array(raw)[1]:
+    try:
+        statuses = decode_diagnostic_array(raw)[1]
+    except CdrError as err:
+        raise BagReadError(f"{T.INDICES}: {err}") from err
+    for st in statuses:
         try:
             idx, kv = status_indices(st)
         except (KeyError, ValueError):

@@ -19,8 +19,8 @@ from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord, ParamRecordErro
 from hexapod_sim.core.param_log import timeline as make_timeline
 from hexapod_sim.core.params import SPECS, HexapodParams, from_flat, load_params
 
-from .bag_reader import Bag
-from .errors import BagReadError
+from ..bag import Bag
+from ..bag import BagReadError
 from .recording import PARAMS_KEY, RECORDS_KEY, params_from_custom_data
 
 FROM_MCAP = "recorded in the bag (MCAP records, checksummed)"

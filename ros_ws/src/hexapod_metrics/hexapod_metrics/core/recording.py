@@ -16,9 +16,10 @@ from hexapod_sim.core.layout import O_HP
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.core.params import SPECS, HexapodParams, from_flat
 
-from . import cdr
-from .bag_writer import BagWriter
-from .cdr import DiagnosticStatus
+from hexapod_sim.core import cdr
+from hexapod_sim.core.cdr import DiagnosticStatus
+
+from ..bag import BagWriter
 from .indices import REPORTED_NAMES, Indices, indices_from_obs
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -29,7 +30,7 @@ RECORDS_KEY = "hexapod_parameter_records"
 SIM_NODE = "hexapod_sim"
 #: The writer of in-process bags, as named in their parameter records.
 SIMULATE_NODE = "hexapod simulate"
-#: topic -> (message type, offered QoS preset of bag_writer.QOS_PRESETS)
+#: topic -> (message type, offered QoS preset of bag.QOS_PRESETS)
 TOPICS: dict[str, tuple[str, str]] = {
     T.CLOCK: ("rosgraph_msgs/msg/Clock", "reliable"),
     T.JOINT_STATES: (JOINT_STATE, "reliable"),

@@ -29,3 +29,7 @@ class UnreachableTargetError(HexapodError, ValueError):
 
 class DivergenceError(HexapodError, ArithmeticError):
     """The numerical integration blew up (non-finite or absurd state)."""
+
+
+class CdrError(HexapodError, ValueError):
+    """Bytes are not the serialized (little-endian CDR) message they should be."""

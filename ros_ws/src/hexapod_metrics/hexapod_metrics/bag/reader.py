@@ -20,14 +20,16 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
 
-from . import cdr
-from .cdr import JointStateArrays, JointStateDecoder
+from hexapod_sim.core import cdr
+from hexapod_sim.core.cdr import JointStateArrays, JointStateDecoder
+from hexapod_sim.core.errors import CdrError
+
+from ._closing import Closing
 from .errors import BagError, BagReadError
 from .msgdefs import TYPE_JOINT_STATE
 
@@ -66,6 +68,9 @@ def _boundary(what: str) -> Iterator[None]:
         yield
     except BagError:
         raise
+    except CdrError as err:
+        msg = f'{what}: {err}'
+        raise BagReadError(msg) from err
     except MemoryError as err:
         msg = f'{what}: out of memory (is the file corrupt?)'
         raise BagReadError(msg) from err
@@ -538,7 +543,7 @@ def _records(raw: bytes, what: str) -> Iterator[tuple[int, int, int]]:
 # --------------------------------------------------------------------------- the bag
 
 
-class Bag:
+class Bag(Closing):
     """An open bag: topics with counts, truncation state, message streams."""
 
     def __init__(self, path: Path, files: list[_McapFile], metadata: dict[str, Any] | None):
@@ -609,19 +614,6 @@ class Bag:
         """Close the files."""
         for mf in self.files:
             mf.close()
-
-    def __enter__(self) -> Bag:
-        """Use as a context manager."""
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        """Close on leaving ``with``."""
-        self.close()
 
 
 def _block_messages(

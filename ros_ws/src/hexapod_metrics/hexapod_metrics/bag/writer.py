@@ -57,13 +57,14 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from types import TracebackType
 from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
-from . import cdr
+from hexapod_sim.core import cdr
+
+from ._closing import Closing
 from .errors import BagStorageError, BagWriteError
 from .msgdefs import TYPE_CLOCK, TYPE_DIAGNOSTIC_ARRAY, TYPE_JOINT_STATE, TYPE_STRING, lookup
 
@@ -238,7 +239,7 @@ class _File:
         return sum(1 for c in self.log if c.chunk_index)
 
 
-class BagWriter:
+class BagWriter(Closing):
     """Write one rosbag2 bag directory; cheap constructor, I/O in :meth:`open`/:meth:`close`.
 
     ``compression``: ``''`` (default: decoding is then bound by memory bandwidth, about
@@ -368,15 +369,6 @@ class BagWriter:
     def __enter__(self) -> BagWriter:
         """Open on entering ``with``."""
         return self.open()
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        """Close on leaving ``with``, also after an exception."""
-        self.close()
 
     @property
     def closed(self) -> bool:

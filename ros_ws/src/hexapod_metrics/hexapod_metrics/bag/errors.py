@@ -1,4 +1,4 @@
-"""Errors raised by the bag writer and reader.
+"""Errors of the bag subpackage (writer, reader).
 
 Every message is one line that says what was expected, what was found and, where it helps,
 what the user can do about it. Low-level failures (``OSError``, ``struct.error``, decompressor
@@ -7,7 +7,7 @@ errors, ...) are translated at the module boundary with ``raise BagReadError(msg
 
 from __future__ import annotations
 
-__all__ = ['BagError', 'BagReadError', 'BagStorageError', 'BagTruncatedWarning', 'BagWriteError']
+__all__ = ['BagError', 'BagReadError', 'BagStorageError', 'BagWriteError']
 
 
 class BagError(Exception):
@@ -34,6 +34,3 @@ class BagStorageError(BagWriteError):
 class BagReadError(BagError):
     """A path is not a readable bag, or its content is damaged beyond the readable prefix."""
 
-
-class BagTruncatedWarning(UserWarning):
-    """A bag was not closed cleanly (e.g. its writer was killed); only a prefix was read."""
