@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import struct
-import zlib
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -24,6 +23,7 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
+from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
 
 from hexapod_sim.core import cdr
 from hexapod_sim.core.cdr import JointStateArrays, JointStateDecoder
@@ -220,7 +220,7 @@ class _McapFile:
         self.summary_damaged = True  # until parsed: there is a summary, is it usable?
         if crc:
             body = self._read(summary_start, self.size - 37 - summary_start) + tail[:25]
-            if zlib.crc32(body) != crc:
+            if crc32(body) != crc:
                 return False
         try:
             self._parse_summary(self._read(summary_start, end - summary_start))
@@ -458,7 +458,7 @@ class _McapFile:
             msg = f'{where} has {len(raw)} bytes, expected {chunk.uncompressed_size} (corrupt)'
             raise BagReadError(msg)
         checked = _self_checked(data, chunk.compression)
-        if chunk.crc and not checked and zlib.crc32(raw) != chunk.crc:
+        if chunk.crc and not checked and crc32(raw) != chunk.crc:
             msg = f'{where} fails its CRC check (corrupt)'
             raise BagReadError(msg)
         return raw
@@ -634,15 +634,8 @@ def _block_messages(
         found = [(int(o), c) for c in ids if c in block.indexes
                  for o in cast("npt.NDArray[np.int64]", mf.index_offsets(block, c))]
         for pos, channel in sorted(found):
-            if pos + 31 > len(raw) or raw[pos] != 5:
-                msg = f'{mf.what}: message index does not match the chunk records (corrupt)'
-                raise BagReadError(msg)
-            length, got = _U64.unpack_from(raw, pos + 1)[0], _U16.unpack_from(raw, pos + 9)[0]
-            if got != channel or length < 22 or pos + 9 + length > len(raw):
-                msg = f'{mf.what}: message index does not match the chunk records (corrupt)'
-                raise BagReadError(msg)
-            log_time = _U64.unpack_from(raw, pos + 15)[0]
-            yield ids[channel], int(log_time), raw[pos + 31:pos + 9 + length]
+            for log_time, data in _messages_at(mf.what, raw, np.array([pos]), channel):
+                yield ids[channel], log_time, data
         return
     for channel, pos, length in _records(raw, mf.what):
         if channel in ids:
@@ -745,6 +738,7 @@ def iter_joint_state_blocks(
     *,
     prefetch: int = 2,
     frames: dict[str, list[tuple[int, str]]] | None = None,
+    others: dict[str, list[tuple[int, bytes]]] | None = None,
 ) -> Iterator[tuple[str, JointStateArrays]]:
     """Yield (topic, arrays) chunk by chunk in file order, decoding all ``topics`` in one
     pass. A helper thread reads and decompresses up to ``prefetch`` chunks ahead (the
@@ -752,21 +746,25 @@ def iter_joint_state_blocks(
 
     ``frames``: for each topic that is a key, the (stamp ns, frame_id) of every message
     whose header.frame_id differs from the one before it are appended to its list before
-    the block is yielded (vectorised, see :meth:`JointStateDecoder.frame_changes`)."""
+    the block is yielded (vectorised, see :meth:`JointStateDecoder.frame_changes`).
+    ``others``: for each topic that is a key (of any type; absent topics are skipped), its
+    (log time ns, serialized bytes) are appended in the same pass (one read of the bag)."""
     _check_topics(bag, topics)
     decoders = {topic: JointStateDecoder() for topic in topics}
     for topic, found in (frames or {}).items():
         decoders[topic].frame_log = found
+    extra = others or {}
     for mf in bag.files:
         with _boundary(mf.what):
-            ids = {c.id: c.topic for c in mf.channels.values() if c.topic in topics}
+            ids = {c.id: c.topic for c in mf.channels.values()
+                   if c.topic in decoders or c.topic in extra}
         blocks = [
             b for b in mf.blocks
             if isinstance(b, _Loose) or b.indexes is None or any(c in b.indexes for c in ids)
         ]
         for loaded in _prefetched(mf, blocks, ids, prefetch):
             with _boundary(mf.what):
-                out = list(_decode_loaded(mf, loaded, ids, decoders))
+                out = list(_decode_loaded(mf, loaded, ids, decoders, extra))
             yield from out
 
 
@@ -827,16 +825,39 @@ def _decode_loaded(
     loaded: _Loaded | _Loose,
     ids: dict[int, str],
     decoders: dict[str, JointStateDecoder],
+    others: dict[str, list[tuple[int, bytes]]],
 ) -> Iterator[tuple[str, JointStateArrays]]:
     if isinstance(loaded, _Loose):
-        for topic, _, data in _block_messages(mf, loaded, ids):
-            yield topic, _slow(decoders[topic], [data])
+        for topic, log_time, data in _block_messages(mf, loaded, ids):
+            if topic in decoders:
+                yield topic, _slow(decoders[topic], [data])
+            else:
+                others[topic].append((log_time, data))
         return
     raw, offsets = loaded
     buf = np.frombuffer(raw, np.uint8)
     for channel, found in offsets.items():
         topic = ids[channel]
-        yield topic, _decode_records(mf.what, buf, found, channel, decoders[topic])
+        if topic in decoders:
+            yield topic, _decode_records(mf.what, buf, found, channel, decoders[topic])
+        else:
+            others[topic].extend(_messages_at(mf.what, raw, found, channel))
+
+
+def _messages_at(
+    what: str, raw: bytes, offsets: npt.NDArray[np.int64], channel: int,
+) -> Iterator[tuple[int, bytes]]:
+    """(log time, bytes) of ``channel``'s Message records at ``offsets`` of a chunk."""
+    for pos in offsets.tolist():
+        if pos + 31 > len(raw) or raw[pos] != 5:
+            msg = f'{what}: message index does not match the chunk records (corrupt)'
+            raise BagReadError(msg)
+        length, got = _U64.unpack_from(raw, pos + 1)[0], _U16.unpack_from(raw, pos + 9)[0]
+        if got != channel or length < 22 or pos + 9 + length > len(raw):
+            msg = f'{what}: message index does not match the chunk records (corrupt)'
+            raise BagReadError(msg)
+        log_time = _U64.unpack_from(raw, pos + 15)[0]
+        yield int(log_time), raw[pos + 31:pos + 9 + length]
 
 
 def _decode_records(

@@ -51,7 +51,6 @@ import re
 import struct
 import threading
 import time
-import zlib
 from bisect import bisect_left
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -61,6 +60,7 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
 
 from hexapod_sim.core import cdr
 
@@ -670,7 +670,7 @@ class BagWriter(Closing):
         compressed = self._compress(raw)
         body = (
             _U64.pack(start) + _U64.pack(end) + _U64.pack(len(raw))
-            + _U32.pack(zlib.crc32(raw)) + _string(self._compression)
+            + _U32.pack(crc32(raw)) + _string(self._compression)
             + _U64.pack(len(compressed)) + compressed
         )
         record = _record(0x06, body)
@@ -774,7 +774,7 @@ class BagWriter(Closing):
         for name, (media_type, content, log_time) in self._attachments.items():
             body = (_U64.pack(log_time) + _U64.pack(log_time) + _string(name)
                     + _string(media_type) + _U64.pack(len(content)) + content)
-            rec = _record(0x09, body + _U32.pack(zlib.crc32(body)))
+            rec = _record(0x09, body + _U32.pack(crc32(body)))
             attach_index.append(_record(
                 0x0A, _U64.pack(start + len(data)) + _U64.pack(len(rec)) + _U64.pack(log_time)
                 + _U64.pack(log_time) + _U64.pack(len(content)) + _string(name)
@@ -800,7 +800,7 @@ class BagWriter(Closing):
                 summary += group
         offset_start = summary_start + len(summary)
         footer = b'\x02' + _U64.pack(20) + _U64.pack(summary_start) + _U64.pack(offset_start)
-        crc = zlib.crc32(bytes(summary + offsets) + footer)
+        crc = crc32(bytes(summary + offsets) + footer)
         return b''.join((data, data_end, summary, offsets, footer, _U32.pack(crc), MAGIC))
 
     def _statistics(self, f: _File, commit: _Commit) -> bytes:

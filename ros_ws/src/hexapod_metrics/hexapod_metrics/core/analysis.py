@@ -150,37 +150,60 @@ def label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray
 
 
 class _Buffer:
-    """Rows of one topic not yet consumed, keyed by tick."""
+    """Rows of one topic not yet consumed, keyed by tick: one growable (n, 3, width) array
+    whose live rows are ``[a, b)``, so a push copies only the new rows."""
 
     def __init__(self) -> None:
-        self.k = np.zeros(0, np.int64)
-        self.data: np.ndarray | None = None  # (n, 3, width)
+        self._k = np.zeros(0, np.int64)
+        self._data = np.zeros((0, 3, 0))
+        self._a = self._b = 0
+
+    @property
+    def k(self) -> np.ndarray:
+        """Ticks of the live rows, ascending."""
+        return self._k[self._a:self._b]
+
+    def _room(self, n: int, width: int) -> None:
+        live = self._b - self._a
+        if self._b + n <= len(self._k) and self._data.shape[2] == width:
+            return
+        cap = max(2 * (live + n), 4096) if live + n > len(self._k) // 2 else len(self._k)
+        k = np.empty(cap, np.int64)
+        data = np.empty((cap, 3, width))
+        if live:  # (a topic's width never changes: the decoder refuses other names)
+            k[:live] = self._k[self._a:self._b]
+            data[:live] = self._data[self._a:self._b]
+        self._k, self._data, self._a, self._b = k, data, 0, live
 
     def push(self, k: np.ndarray, pos: np.ndarray, vel: np.ndarray, eff: np.ndarray) -> None:
-        rows = np.stack([pos, vel, eff], axis=1)
-        joint = self.k[-1:]  # the new ticks must follow the old ones (checked at the seam)
-        ordered = bool(np.all(np.diff(np.concatenate([joint, k])) > 0))
-        self.k = np.concatenate([self.k, k])
-        self.data = rows if self.data is None else np.concatenate([self.data, rows])
+        n = len(k)
+        if n == 0:
+            return
+        self._room(n, pos.shape[1])
+        a, b = self._a, self._b
+        # the new ticks must follow the old ones (checked at the seam)
+        ordered = (b == a or int(k[0]) > int(self._k[b - 1])) and bool(np.all(np.diff(k) > 0))
+        self._k[b:b + n] = k
+        rows = self._data[b:b + n]
+        rows[:, 0], rows[:, 1], rows[:, 2] = pos, vel, eff
+        self._b = b + n
         if not ordered:  # out of order or duplicated: sort, keep the first
-            self.k, first = np.unique(self.k, return_index=True)
-            self.data = self.data[first]
+            ks, first = np.unique(self._k[a:self._b], return_index=True)
+            self._data[a:a + len(ks)] = self._data[a:self._b][first]
+            self._k[a:a + len(ks)] = ks
+            self._b = a + len(ks)
 
     def window(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Ticks present in [k0, k1] and their rows."""
-        a, b = np.searchsorted(self.k, [k0, k1 + 1])
-        assert self.data is not None
-        return self.k[a:b], self.data[a:b]
+        """Ticks present in [k0, k1] and their rows (views, valid until the next push)."""
+        i, j = np.searchsorted(self.k, [k0, k1 + 1])
+        return self.k[i:j], self._data[self._a + i:self._a + j]
 
     def drop_before(self, k: int) -> None:
-        a = int(np.searchsorted(self.k, k))
-        self.k = self.k[a:]
-        if self.data is not None:
-            self.data = self.data[a:]
+        self._a += int(np.searchsorted(self.k, k))
 
     @property
     def last(self) -> int:
-        return int(self.k[-1]) if len(self.k) else -1
+        return int(self._k[self._b - 1]) if self._b > self._a else -1
 
 
 def _online_records(raw: bytes) -> list[tuple[int, str, Indices]]:
@@ -209,7 +232,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
-        online = online_indices(bag)
+        indices_raw: dict[str, list[tuple[int, bytes]]] = {T.INDICES: []}  # same pass
         # controller changes (joint_states' frame_id, found vectorised in the same pass as
         # the decoding) and, among them, a boundary at every parameter change
         frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
@@ -259,7 +282,8 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             return CycleResult(c, k0 * dt, k1 * dt, who,
                                sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
-        for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames):
+        for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames,
+                                                     others=indices_raw):
             if frames[T.JOINT_STATES]:  # labels of ticks up to the newest state are final
                 switch_ticks += ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
                 frames[T.JOINT_STATES].clear()
@@ -275,6 +299,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
                 next_cycle = -(-first_tick // m)  # first cycle boundary at or after it
             consume(final=False)
         consume(final=True)
+        online = [r for _, raw in indices_raw[T.INDICES] for r in _online_records(raw)]
         truncated, reason = bag.truncated, bag.truncation_reason
     if ticks == 0:
         why = f" (truncated: {reason})" if truncated else ""

@@ -28,6 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from .errors import CdrError
 from . import topics as T
@@ -399,10 +400,11 @@ class JointStateLayout(NamedTuple):
     """Byte layout shared by the JointStates of one topic, taken from a first message.
 
     Offsets are in bytes of the serialized message (encapsulation header included).
-    ``reference``/``mask`` cover the message prefix up to the first position value: the
-    encapsulation, names and position count must equal ``reference`` wherever ``mask`` is
-    set. Padding, stamp and frame_id are free: a frame_id of another length but the same
-    padded length moves nothing (a longer one changes the size, hence the layout).
+    ``reference``/``keep`` cover the message prefix up to the first position value: the
+    encapsulation, names and position count must equal ``reference`` wherever ``keep`` is
+    set. Padding, stamp and
+    frame_id are free: a frame_id of another length but the same padded length moves
+    nothing (a longer one changes the size, hence the layout).
     """
 
     size: int
@@ -411,18 +413,15 @@ class JointStateLayout(NamedTuple):
     vel: int
     eff: int
     """Offsets of the first position, velocity and effort value."""
-    reference: npt.NDArray[np.uint64]
-    mask: npt.NDArray[np.uint64]
+    reference: npt.NDArray[np.uint8]
+    """The message prefix up to the first position value, where ``keep`` is set."""
+    keep: npt.NDArray[np.uint8]
+    """0xFF at the constant bytes of the prefix (encapsulation, names, counts), else 0."""
 
     @property
     def k(self) -> int:
         """Number of joints."""
         return len(self.names)
-
-    @property
-    def prefix(self) -> int:
-        """Length of the compared prefix (a multiple of 8)."""
-        return 8 * len(self.mask)
 
 
 def joint_state_layout(data: bytes | memoryview) -> JointStateLayout:
@@ -452,33 +451,65 @@ def joint_state_layout(data: bytes | memoryview) -> JointStateLayout:
     keep[4:12] = 0  # stamp
     keep[frame_at:names_at] = 0  # frame_id may vary within its padded length
     keep[starts[0]:] = 0
-    mask = keep.view('<u8').copy()
-    reference = np.frombuffer(data, '<u8', count=prefix // 8) & mask
-    return JointStateLayout(size, names, starts[0], starts[1], starts[2], reference, mask)
+    reference = np.frombuffer(data, np.uint8, count=prefix) & keep
+    return JointStateLayout(size, names, starts[0], starts[1], starts[2], reference, keep)
+
+
+@njit(cache=True, nogil=True)
+def _check_rows(
+    buf: npt.NDArray[np.uint8],
+    starts: IntArray,
+    reference: npt.NDArray[np.uint8],
+    keep: npt.NDArray[np.uint8],
+    counts_at: IntArray,
+    k: int,
+) -> tuple[BoolArray, IntArray]:  # pragma: no cover (compiled)
+    """Per message at ``buf[starts[i]:]``: do its prefix bytes equal ``reference`` where
+    ``keep`` is set, and the two later counts ``k``? And its stamp (ns). Branch-free over
+    the contiguous prefix, so that LLVM vectorises the compare."""
+    n = starts.shape[0]
+    width = reference.shape[0]
+    ok = np.empty(n, np.bool_)
+    stamps = np.empty(n, np.int64)
+    for i in range(n):
+        s = starts[i]
+        acc = np.uint8(0)
+        for j in range(width):
+            acc |= (buf[s + j] ^ reference[j]) & keep[j]
+        good = acc == 0
+        for at in counts_at:
+            count = (np.int64(buf[s + at]) | np.int64(buf[s + at + 1]) << 8
+                     | np.int64(buf[s + at + 2]) << 16 | np.int64(buf[s + at + 3]) << 24)
+            good = good and count == k
+        ok[i] = good
+        sec = (np.int64(buf[s + 4]) | np.int64(buf[s + 5]) << 8
+               | np.int64(buf[s + 6]) << 16 | np.int64(buf[s + 7]) << 24)
+        if sec >= 2**31:
+            sec -= 2**32
+        nsec = (np.int64(buf[s + 8]) | np.int64(buf[s + 9]) << 8
+                | np.int64(buf[s + 10]) << 16 | np.int64(buf[s + 11]) << 24)
+        stamps[i] = sec * 1_000_000_000 + nsec
+    return ok, stamps
 
 
 def decode_joint_state_rows(
-    rows: npt.NDArray[np.uint8],
+    buf: npt.NDArray[np.uint8],
+    starts: IntArray,
     layout: JointStateLayout,
 ) -> tuple[BoolArray, IntArray, FloatArray, FloatArray, FloatArray]:
-    """Decode JointStates stored one per row of ``rows`` (n, >= size), message at column 0.
+    """Decode the JointStates ``buf[starts[i]:starts[i] + layout.size]`` of one layout.
 
-    ``rows`` may be a strided view straight into a decompressed chunk (no copy) or a
-    gathered copy. Returns ``ok`` (n,), stamps (n,) and position, velocity, effort as
-    (n, k) *views* into ``rows``; copy them out before ``rows`` goes away. Rows with
-    ``ok == False`` have another layout and hold garbage: decode those one by one.
+    Returns ``ok`` (n,), stamps (n,) and position, velocity, effort as (n, k) *views* into
+    ``buf`` (strided when the messages are evenly spaced, else gathered copies); copy them
+    out before ``buf`` goes away. Rows with ``ok == False`` have another layout and hold
+    garbage: decode those one by one. The caller guarantees ``buf`` holds every message.
     """
-    n = rows.shape[0]
     k = layout.k
-    diff = rows[:, :layout.prefix].view('<u8') & layout.mask
-    diff ^= layout.reference
-    ok = np.bitwise_or.reduce(diff, axis=1) == 0
-    for at in (layout.vel, layout.eff):  # the two later counts (4 bytes before padding)
-        ok &= rows[:, at - 8:at - 4].view('<u4')[:, 0] == k
-    stamp = rows[:, 4:12].view('<i4')
-    stamps = stamp[:, 0].astype(np.int64) * _NS + stamp[:, 1].view('<u4')
+    counts_at = np.array([layout.vel - 8, layout.eff - 8], np.int64)  # before their padding
+    ok, stamps = _check_rows(buf, starts, layout.reference, layout.keep, counts_at, k)
+    rows = gather_rows(buf, starts, layout.size)
     views = [rows[:, at:at + 8 * k].view('<f8') for at in (layout.pos, layout.vel, layout.eff)]
-    return ok.reshape(n), stamps, views[0], views[1], views[2]
+    return ok, stamps, views[0], views[1], views[2]
 
 
 def gather_rows(
@@ -580,9 +611,7 @@ class JointStateDecoder:
         if bool((sizes == first).all()):
             layout = self._layout(first, bytes(buf[starts[0]:starts[0] + first]))
             if layout is not None:
-                ok, stamps, pos, vel, eff = decode_joint_state_rows(
-                    gather_rows(buf, starts, first), layout,
-                )
+                ok, stamps, pos, vel, eff = decode_joint_state_rows(buf, starts, layout)
                 if bool(ok.all()):
                     self.names = layout.names
                     return JointStateArrays(stamps, layout.names, pos, vel, eff)
@@ -601,8 +630,7 @@ class JointStateDecoder:
             sel = np.flatnonzero(sizes == size)
             layout = self._layout(int(size), bytes(buf[starts[sel[0]]:starts[sel[0]] + size]))
             if layout is not None:
-                rows = gather_rows(buf, starts[sel], int(size))
-                good, *arrays = decode_joint_state_rows(rows, layout)
+                good, *arrays = decode_joint_state_rows(buf, starts[sel], layout)
                 ok[sel] = good
                 parts.append((sel, arrays))
                 self.names = self.names or layout.names
