@@ -14,7 +14,12 @@ that each reports its own peak RSS:
 * ``analyze``: the whole ``hexapod analyze`` pipeline (``analyze_bag``: streamed decode,
   frame_id labels, per-cycle indices, online indices, plot series) on a graph-format bag
   of ``--analyze-seconds`` simulated seconds (default 60) written by ``simulate --bag``'s
-  writer, every topic of the graph; the rate counts every message in the bag.
+  writer, every topic of the graph; the rate counts every message in the bag;
+* on the same graph bag, reading (and decoding) the four JointState topics analyze uses,
+  two ways: ``graph-ours`` (this project's reader, ``iter_joint_state_blocks``) and
+  ``graph-mcap`` (the ``mcap`` library's ``SeekingReader.iter_messages``, raw bytes, with
+  this project's vectorised decoder on top, batches of 4096 messages per topic): what
+  building the reader on the library would cost S6.
 
 Prints medians of ``--repeats`` runs (wall clock and process CPU time), the ratio and
 peak RSS. The machine is shared: compare the ratio, not the absolute figures.
@@ -90,12 +95,36 @@ def child(mode: str, bag: Path, subset: int) -> dict[str, float]:
         open_bag,
         read_joint_state_arrays,
     )
-
     from hexapod_metrics.core.analysis import analyze_bag
 
     rss0 = _peak_rss_mb()
     w0, c0 = time.perf_counter(), time.process_time()
-    if mode == 'analyze':
+    streams = ['/hexapod/joint_states', '/hexapod/foot_forces', '/hexapod/hip_states',
+               '/hexapod/reference']
+    if mode == 'graph-ours':
+        with open_bag(bag) as opened:
+            count = sum(opened.topics[t].message_count for t in streams)
+            check = sum(float(b.position[:, 0].sum())
+                        for _, b in iter_joint_state_blocks(opened, streams))
+    elif mode == 'graph-mcap':
+        from hexapod_sim.core.cdr import decode_joint_state_batch
+        from mcap.reader import make_reader
+
+        batches: dict[str, list[bytes]] = {t: [] for t in streams}
+        count, check = 0, 0.0
+        with open(next(bag.glob('*.mcap')), 'rb') as fh:
+            for _, channel, message in make_reader(fh).iter_messages(topics=streams):
+                batch = batches[channel.topic]
+                batch.append(message.data)
+                if len(batch) == 4096:
+                    check += float(decode_joint_state_batch(batch).position[:, 0].sum())
+                    count += len(batch)
+                    batch.clear()
+        for batch in batches.values():
+            if batch:
+                check += float(decode_joint_state_batch(batch).position[:, 0].sum())
+                count += len(batch)
+    elif mode == 'analyze':
         with open_bag(bag) as opened:
             count = opened.message_count
         result = analyze_bag(bag)
@@ -183,7 +212,12 @@ def main() -> None:
         graph_bag = Path(tmp) / 'graph'
         count = write_graph_bag(graph_bag, args.analyze_seconds)
         size = sum(f.stat().st_size for f in graph_bag.iterdir()) / 1e6
-        runs = [run_child('analyze', graph_bag, 0) for _ in range(args.repeats)]
+        graph: dict[str, list[dict[str, float]]] = {
+            'analyze': [], 'graph-ours': [], 'graph-mcap': []}
+        for _ in range(args.repeats):  # interleaved, so that load changes hit all alike
+            for mode, runs in graph.items():
+                runs.append(run_child(mode, graph_bag, 0))
+        runs = graph['analyze']
         wall = statistics.median(r['wall'] for r in runs)
         cpu = statistics.median(r['cpu'] for r in runs)
         rss = max(r['rss_peak_mb'] for r in runs)
@@ -192,6 +226,14 @@ def main() -> None:
               f'peak RSS {rss:.0f} MB (after imports {base:.0f} MB): {count:,} messages, '
               f'{args.analyze_seconds:g} s graph-format bag, {size:.0f} MB, {wall:.2f} s '
               f'(median of {args.repeats}); S6 target >= 1,000,000 msg/s')
+        for mode in ('graph-ours', 'graph-mcap'):
+            runs = graph[mode]
+            n = runs[0]['count']
+            wall = statistics.median(r['wall'] for r in runs)
+            cpu = statistics.median(r['cpu'] for r in runs)
+            print(f'{mode:>10}: {n / wall:>12,.0f} msg/s wall, {n / cpu:>12,.0f} msg/s CPU, '
+                  f'peak RSS {max(r["rss_peak_mb"] for r in runs):.0f} MB: the {n:,} '
+                  'JointStates analyze decodes')
         if args.only_analyze:
             return
         bag = Path(tmp) / 'bench'

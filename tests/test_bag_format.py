@@ -14,17 +14,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
-from hexapod_sim.core import cdr
 from hexapod_metrics.bag import (
+    BagReadError,
+    BagWriteError,
+    BagWriter,
+    QosProfile,
     iter_joint_state_blocks,
     open_bag,
+    qos_yaml,
     read_joint_state_arrays,
     read_joint_state_topics,
 )
-from hexapod_metrics.bag import BagWriter, QosProfile, qos_yaml
-from hexapod_metrics.bag import BagReadError, BagWriteError
 from hexapod_metrics.bag.msgdefs import MESSAGE_TYPES, TYPE_JOINT_STATE
+from hexapod_sim.core import cdr
 
 LEGS = [f'leg{i}_{j}' for i in range(1, 7) for j in ('hip', 'knee')]
 FEET = [f'leg{i}_foot_{a}' for i in range(1, 7) for a in ('x', 'y')]

@@ -12,14 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
-from hexapod_sim.core import cdr
-from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-from hexapod_metrics.bag import RESERVE_NAME, BagWriter
-from hexapod_metrics.bag import BagReadError, BagStorageError, BagWriteError
-from hexapod_metrics.core.log_times import ControllerLogTimes, marker_array_stamp
-
 from graph.small_disk import small_disk
+from hexapod_metrics.bag import (
+    RESERVE_NAME,
+    BagStorageError,
+    BagWriteError,
+    BagWriter,
+    open_bag,
+    read_joint_state_arrays,
+)
+from hexapod_metrics.core.log_times import ControllerLogTimes, marker_array_stamp
+from hexapod_sim.core import cdr
 
 mcap_reader = pytest.importorskip("mcap.reader", reason="mcap is not installed")
 highlevel = pytest.importorskip("rosbags.highlevel", reason="rosbags is not installed")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from hexapod_sim.core import cdr
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.errors import CdrError

@@ -23,11 +23,10 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 import numpy.typing as npt
-from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
-
 from hexapod_sim.core import cdr
 from hexapod_sim.core.cdr import JointStateArrays, JointStateDecoder
 from hexapod_sim.core.errors import CdrError
+from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
 
 from ._closing import Closing
 from .errors import BagError, BagReadError
@@ -631,8 +630,10 @@ def _block_messages(
         return
     raw = mf.inflate(block)
     if block.indexes is not None and len(ids) < len(mf.channels):  # a few topics: index
-        found = [(int(o), c) for c in ids if c in block.indexes
-                 for o in cast("npt.NDArray[np.int64]", mf.index_offsets(block, c))]
+        found = []
+        for c in ids:
+            at = mf.index_offsets(block, c)
+            found += [(int(o), c) for o in (at if at is not None else ())]
         for pos, channel in sorted(found):
             for log_time, data in _messages_at(mf.what, raw, np.array([pos]), channel):
                 yield ids[channel], log_time, data
@@ -669,8 +670,8 @@ def _bag_files(path: Path) -> tuple[Path, list[Path], dict[str, Any] | None]:
             metadata = loaded['rosbag2_bagfile_information']
             if not isinstance(metadata, dict):
                 raise TypeError('not a mapping')
-        except Exception:
-            metadata = None
+        except (OSError, yaml.YAMLError, KeyError, TypeError, RecursionError):
+            metadata = None  # unreadable metadata.yaml: the MCAP alone is the bag
     if metadata is not None:
         storage = metadata.get('storage_identifier', 'mcap')
         if storage != 'mcap':

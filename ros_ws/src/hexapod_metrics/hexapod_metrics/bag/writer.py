@@ -56,13 +56,30 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from operator import itemgetter
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, Self
 
 import numpy as np
 import numpy.typing as npt
-from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
-
 from hexapod_sim.core import cdr
+from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
+from mcap.data_stream import RecordBuilder
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    McapRecord,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.writer import MCAP0_MAGIC
 
 from ._closing import Closing
 from .errors import BagStorageError, BagWriteError
@@ -70,7 +87,7 @@ from .msgdefs import TYPE_CLOCK, TYPE_DIAGNOSTIC_ARRAY, TYPE_JOINT_STATE, TYPE_S
 
 __all__ = ['QOS_PRESETS', 'RESERVE_NAME', 'BagWriter', 'QosProfile', 'qos_yaml']
 
-MAGIC = b'\x89MCAP0\r\n'
+MAGIC = MCAP0_MAGIC
 LIBRARY = 'hexapod_metrics bag_writer 1'
 ROS_DISTRO = 'jazzy'
 _INFINITE = (9223372036, 854775807)  # RMW_DURATION_INFINITE as rosbag2 writes it
@@ -126,20 +143,20 @@ _U16 = struct.Struct('<H')
 _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
 _MSG_HEADER = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, publish
+_MSG_INDEX = struct.Struct('<BQHI')  # opcode, length, channel, length of the pairs
 
 
-def _string(text: str) -> bytes:
-    raw = text.encode()
-    return _U32.pack(len(raw)) + raw
+def _encode(*records: McapRecord) -> bytes:
+    """MCAP records, serialized by the ``mcap`` library."""
+    builder = RecordBuilder()
+    for record in records:
+        record.write(builder)
+    return bytes(builder.end())  # type: ignore[no-untyped-call]  # mcap 1.6: unannotated
 
 
-def _record(opcode: int, body: bytes) -> bytes:
-    return bytes((opcode,)) + _U64.pack(len(body)) + body
-
-
-def _string_map(items: Mapping[str, str]) -> bytes:
-    body = b''.join(_string(k) + _string(v) for k, v in sorted(items.items()))
-    return _U32.pack(len(body)) + body
+def _sorted(items: Mapping[str, str]) -> dict[str, str]:
+    """A string map in key order (the library writes maps in insertion order)."""
+    return dict(sorted(items.items()))
 
 
 def _compressor(name: str) -> Callable[[bytes], bytes]:
@@ -339,7 +356,7 @@ class BagWriter(Closing):
     def _files(self) -> list[_File]:
         return self._done + ([self._file] if self._file else [])
 
-    def open(self) -> BagWriter:
+    def open(self) -> Self:
         """Create the bag directory, the first MCAP file, the reserve and ``metadata.yaml``."""
         with self._lock:
             if self._file is not None or self._closed:
@@ -366,7 +383,7 @@ class BagWriter(Closing):
         with self._lock:
             self._close_locked()
 
-    def __enter__(self) -> BagWriter:
+    def __enter__(self) -> Self:
         """Open on entering ``with``."""
         return self.open()
 
@@ -412,15 +429,12 @@ class BagWriter(Closing):
             schema_id, schema = self._schemas.get(msgtype, (len(self._schemas) + 1, b''))
             new_schema = not schema
             if new_schema:
-                body = _U16.pack(schema_id) + _string(msgtype) + _string('ros2msg')
-                schema = _record(0x03, body + _string(definition))
+                schema = _encode(Schema(id=schema_id, data=definition.encode(),
+                                        encoding='ros2msg', name=msgtype))
             channel_id = len(self._topics) + 1
             meta = {'offered_qos_profiles': qos_yaml(profiles), 'topic_type_hash': type_hash}
-            channel = _record(
-                0x04,
-                _U16.pack(channel_id) + _U16.pack(schema_id) + _string(name)
-                + _string('cdr') + _string_map(meta),
-            )
+            channel = _encode(Channel(id=channel_id, topic=name, message_encoding='cdr',
+                                      metadata=_sorted(meta), schema_id=schema_id))
             if new_schema:
                 self._schemas[msgtype] = (schema_id, schema)
             self._channels.append(channel)
@@ -450,8 +464,8 @@ class BagWriter(Closing):
             f = self._file
             assert f is not None
             at = f.end
-            record = _record(0x0C, _string(name) + _string_map(items))
-            index = _record(0x0D, _U64.pack(at) + _U64.pack(len(record)) + _string(name))
+            record = _encode(Metadata(name, _sorted(items)))
+            index = _encode(MetadataIndex(at, len(record), name))
             f.metadata_indexes.append(index)  # in the summary of the tail written next
             try:
                 self._append(record)
@@ -484,9 +498,7 @@ class BagWriter(Closing):
             try:
                 self._write_locked(topic, int(timestamp_ns), data)
             finally:
-                self._busy = None
-                if self._close_requested:
-                    self._close_locked()
+                self._done_writing()
 
     def write_joint_state(
         self,
@@ -539,9 +551,13 @@ class BagWriter(Closing):
             try:
                 self._flush_chunk(everything=True)
             finally:
-                self._busy = None
-                if self._close_requested:
-                    self._close_locked()
+                self._done_writing()
+
+    def _done_writing(self) -> None:
+        """Leave write()/flush(); run a close() that a signal handler asked for meanwhile."""
+        self._busy = None
+        if self._close_requested:
+            self._close_locked()
 
     # ------------------------------------------------------------------ internals
 
@@ -668,30 +684,27 @@ class BagWriter(Closing):
             counts_list.append((channel_id, len(pairs)))
         start, end = taken[0][0], taken[-1][0]
         compressed = self._compress(raw)
-        body = (
-            _U64.pack(start) + _U64.pack(end) + _U64.pack(len(raw))
-            + _U32.pack(crc32(raw)) + _string(self._compression)
-            + _U64.pack(len(compressed)) + compressed
-        )
-        record = _record(0x06, body)
+        record = _encode(Chunk(
+            compression=self._compression, data=compressed, message_end_time=end,
+            message_start_time=start, uncompressed_crc=crc32(raw), uncompressed_size=len(raw)))
         chunk_start = self._file.end
         indexes = []
-        offsets = []
+        offsets: dict[int, int] = {}
         at = chunk_start + len(record)
         for channel_id, pairs_bytes in sorted(index.items()):
-            rec = _record(0x07, _U16.pack(channel_id) + _U32.pack(len(pairs_bytes))
-                          + pairs_bytes)
-            offsets.append(_U16.pack(channel_id) + _U64.pack(at))
+            # Message Index by hand: the (time, offset) pairs are one numpy buffer, where
+            # the library's MessageIndex packs them one by one in Python
+            rec = (_MSG_INDEX.pack(0x07, 6 + len(pairs_bytes), channel_id, len(pairs_bytes))
+                   + pairs_bytes)
+            offsets[channel_id] = at
             indexes.append(rec)
             at += len(rec)
-        offset_map = b''.join(offsets)
-        chunk_index = _record(
-            0x08,
-            _U64.pack(start) + _U64.pack(end) + _U64.pack(chunk_start)
-            + _U64.pack(len(record)) + _U32.pack(len(offset_map)) + offset_map
-            + _U64.pack(sum(len(r) for r in indexes)) + _string(self._compression)
-            + _U64.pack(len(compressed)) + _U64.pack(len(raw)),
-        )
+        chunk_index = _encode(ChunkIndex(
+            chunk_length=len(record), chunk_start_offset=chunk_start,
+            compression=self._compression, compressed_size=len(compressed),
+            message_end_time=end, message_index_length=sum(len(r) for r in indexes),
+            message_index_offsets=offsets, message_start_time=start,
+            uncompressed_size=len(raw)))
         commit = _Commit(at, rest, chunk_index, tuple(counts_list), start, end)
         self._append(record + b''.join(indexes), commit)
         self._pending_bytes -= len(raw)
@@ -766,21 +779,17 @@ class BagWriter(Closing):
         data = bytearray()
         meta_index = []
         for name, items in records:
-            rec = _record(0x0C, _string(name) + _string_map(items))
-            meta_index.append(_record(0x0D, _U64.pack(start + len(data)) + _U64.pack(len(rec))
-                                      + _string(name)))
+            rec = _encode(Metadata(name, _sorted(items)))
+            meta_index.append(_encode(MetadataIndex(start + len(data), len(rec), name)))
             data += rec
         attach_index = []
         for name, (media_type, content, log_time) in self._attachments.items():
-            body = (_U64.pack(log_time) + _U64.pack(log_time) + _string(name)
-                    + _string(media_type) + _U64.pack(len(content)) + content)
-            rec = _record(0x09, body + _U32.pack(crc32(body)))
-            attach_index.append(_record(
-                0x0A, _U64.pack(start + len(data)) + _U64.pack(len(rec)) + _U64.pack(log_time)
-                + _U64.pack(log_time) + _U64.pack(len(content)) + _string(name)
-                + _string(media_type)))
+            rec = _encode(Attachment(log_time, log_time, name, media_type, content))
+            attach_index.append(_encode(AttachmentIndex(
+                offset=start + len(data), length=len(rec), log_time=log_time,
+                create_time=log_time, data_size=len(content), name=name, media_type=media_type)))
             data += rec
-        data_end = b'\x0f' + _U64.pack(4) + _U32.pack(0)
+        data_end = _encode(DataEnd(0))
         summary_start = start + len(data) + len(data_end)
         chunk_indexes = b''.join(c.chunk_index for c in f.log) + commit.chunk_index
         groups: list[tuple[int, bytes]] = [
@@ -795,11 +804,11 @@ class BagWriter(Closing):
         offsets = bytearray()
         for opcode, group in groups:
             if group:
-                offsets += _record(0x0E, bytes((opcode,)) + _U64.pack(summary_start
-                                   + len(summary)) + _U64.pack(len(group)))
+                offsets += _encode(SummaryOffset(opcode, summary_start + len(summary),
+                                                 len(group)))
                 summary += group
         offset_start = summary_start + len(summary)
-        footer = b'\x02' + _U64.pack(20) + _U64.pack(summary_start) + _U64.pack(offset_start)
+        footer = _encode(Footer(summary_start, offset_start, 0))[:-4]  # the CRC covers this
         crc = crc32(bytes(summary + offsets) + footer)
         return b''.join((data, data_end, summary, offsets, footer, _U32.pack(crc), MAGIC))
 
@@ -807,10 +816,7 @@ class BagWriter(Closing):
         flushed = f.counts()
         for channel, n in commit.counts:
             flushed[channel] = flushed.get(channel, 0) + n
-        counts = b''.join(
-            _U16.pack(t.channel_id) + _U64.pack(flushed.get(t.channel_id, 0))
-            for t in self._topics.values()
-        )
+        counts = {t.channel_id: flushed.get(t.channel_id, 0) for t in self._topics.values()}
         total = sum(flushed.values())
         start, end = f.times()
         if commit.counts:
@@ -818,13 +824,11 @@ class BagWriter(Closing):
         if not total:
             start = end = 0
         chunks = f.chunks() + (1 if commit.chunk_index else 0)
-        return _record(
-            0x0B,
-            _U64.pack(total) + _U16.pack(len(self._schemas)) + _U32.pack(len(self._topics))
-            + _U32.pack(len(self._attachments)) + _U32.pack(2 + len(f.metadata_indexes))
-            + _U32.pack(chunks) + _U64.pack(start) + _U64.pack(end)
-            + _U32.pack(len(counts)) + counts,
-        )
+        return _encode(Statistics(
+            attachment_count=len(self._attachments), channel_count=len(self._topics),
+            channel_message_counts=counts, chunk_count=chunks, message_count=total,
+            message_end_time=end, message_start_time=start,
+            metadata_count=2 + len(f.metadata_indexes), schema_count=len(self._schemas)))
 
     def _start_file(self, index: int) -> None:
         """Open MCAP file ``index`` with its header, schemas and channels."""
@@ -835,7 +839,7 @@ class BagWriter(Closing):
             msg = f'cannot create bag file {path}: {err.strerror}'
             raise BagWriteError(msg) from err
         pending = self._file.log[-1].pending if self._file else []
-        header = MAGIC + _record(0x01, _string('ros2') + _string(LIBRARY))
+        header = MAGIC + _encode(Header('ros2', LIBRARY))
         self._file = _File(path, fd, [_Commit(len(header), pending)])
         try:
             _pwrite(self._file, header, 0)

@@ -18,17 +18,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from hexapod_sim.core import topics as T
+from hexapod_sim.core.cdr import decode_diagnostic_array
+from hexapod_sim.core.errors import CdrError
 from hexapod_sim.core.layout import O_HP, O_TQ
 from hexapod_sim.core.param_log import ParamTimeline
 from hexapod_sim.core.params import HexapodParams
 
+from ..bag import Bag, BagReadError, iter_joint_state_blocks, open_bag
 from .bag_params import bag_params
-from ..bag import Bag, iter_joint_state_blocks, open_bag
-from hexapod_sim.core.cdr import decode_diagnostic_array
-from hexapod_sim.core.errors import CdrError
-from ..bag import BagReadError
 from .indices import Indices, WindowSums, sums_from_obs
 from .recording import status_indices
 
@@ -346,5 +344,15 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
     return out
 
 
-__all__ = ["BagAnalysis", "CycleResult", "MIXED", "SegmentResult", "analyze_bag", "label_ticks",
-           "controller_changes", "online_indices", "ticks_of_changes", "with_param_boundaries"]
+__all__ = [
+    "MIXED",
+    "BagAnalysis",
+    "CycleResult",
+    "SegmentResult",
+    "analyze_bag",
+    "controller_changes",
+    "label_ticks",
+    "online_indices",
+    "ticks_of_changes",
+    "with_param_boundaries",
+]

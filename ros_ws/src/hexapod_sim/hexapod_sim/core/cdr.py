@@ -30,8 +30,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from .errors import CdrError
 from . import topics as T
+from .errors import CdrError
 
 __all__ = [
     'CODECS',
@@ -75,6 +75,7 @@ _STAMP = struct.Struct('<iI')
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
+ByteArray = npt.NDArray[np.uint8]
 
 
 class JointStateMsg(NamedTuple):
@@ -554,12 +555,7 @@ class JointStateDecoder:
         self.frame_log: list[tuple[int, str]] | None = None
         """Where the bag reader appends (stamp ns, frame_id) changes, if anyone asks."""
 
-    def frame_changes(
-        self,
-        buf: npt.NDArray[np.uint8],
-        starts: npt.NDArray[np.int64],
-        sizes: npt.NDArray[np.int64],
-    ) -> list[tuple[int, str]]:
+    def frame_changes(self, buf: ByteArray, starts: IntArray, sizes: IntArray) -> list[tuple[int, str]]:
         """(row, frame_id) of every message whose header.frame_id differs from the message
         before it (across calls), vectorised: rows whose frame bytes equal the previous
         row's are skipped with one compare; only candidate rows are decoded."""
@@ -597,12 +593,7 @@ class JointStateDecoder:
             self.layouts[size] = layout
         return self.layouts[size]
 
-    def decode(
-        self,
-        buf: npt.NDArray[np.uint8],
-        starts: npt.NDArray[np.int64],
-        sizes: npt.NDArray[np.int64],
-    ) -> JointStateArrays:
+    def decode(self, buf: ByteArray, starts: IntArray, sizes: IntArray) -> JointStateArrays:
         """Decode the messages ``buf[starts[i]:starts[i] + sizes[i]]`` (all in ``buf``).
 
         In the common case (one size, every row fits) the arrays are views into ``buf``.
@@ -617,12 +608,7 @@ class JointStateDecoder:
                     return JointStateArrays(stamps, layout.names, pos, vel, eff)
         return self._decode_mixed(buf, starts, sizes)
 
-    def _decode_mixed(
-        self,
-        buf: npt.NDArray[np.uint8],
-        starts: npt.NDArray[np.int64],
-        sizes: npt.NDArray[np.int64],
-    ) -> JointStateArrays:
+    def _decode_mixed(self, buf: ByteArray, starts: IntArray, sizes: IntArray) -> JointStateArrays:
         n = len(starts)
         ok = np.zeros(n, bool)
         parts = []
@@ -764,16 +750,16 @@ class JointStateCodec:
                                   np.frombuffer(data, '<f8', n, o1),
                                   np.frombuffer(data, '<f8', n, o2))
         try:
-            msg = _decode_joint_state(_Reader(data, errors='strict'))
+            full = _decode_joint_state(_Reader(data, errors='strict'))
         except UnicodeDecodeError as err:
             text = f'not a serialized JointState: {err}'
             raise CdrError(text) from err
-        arrays = (msg.position, msg.velocity, msg.effort)
-        if msg.names != self.names or any(len(a) != self.n for a in arrays):
+        arrays = (full.position, full.velocity, full.effort)
+        if full.names != self.names or any(len(a) != self.n for a in arrays):
             text = (f'JointState does not carry the {self.n} joints {self.names[0]}..'
                     f'{self.names[-1]} with all three arrays filled')
             raise CdrError(text)
-        return JointStateView(msg.stamp_ns, msg.frame_id, *arrays)
+        return JointStateView(full.stamp_ns, full.frame_id, *arrays)
 
 
 CODECS: dict[str, JointStateCodec] = {
