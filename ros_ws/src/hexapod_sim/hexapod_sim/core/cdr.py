@@ -401,8 +401,8 @@ class JointStateLayout(NamedTuple):
     """Byte layout shared by the JointStates of one topic, taken from a first message.
 
     Offsets are in bytes of the serialized message (encapsulation header included).
-    ``reference``/``keep`` cover the message prefix up to the first position value: the
-    encapsulation, names and position count must equal ``reference`` wherever ``keep`` is
+    ``reference``/``mask`` cover the message prefix up to the first position value: the
+    encapsulation, names and position count must equal ``reference`` wherever ``mask`` is
     set. Padding, stamp and
     frame_id are free: a frame_id of another length but the same padded length moves
     nothing (a longer one changes the size, hence the layout).
@@ -414,10 +414,16 @@ class JointStateLayout(NamedTuple):
     vel: int
     eff: int
     """Offsets of the first position, velocity and effort value."""
-    reference: npt.NDArray[np.uint8]
-    """The message prefix up to the first position value, where ``keep`` is set."""
-    keep: npt.NDArray[np.uint8]
+    reference: npt.NDArray[np.uint64]
+    """The message prefix up to the first position value (8-byte words), where ``mask``
+    is set."""
+    mask: npt.NDArray[np.uint64]
     """0xFF at the constant bytes of the prefix (encapsulation, names, counts), else 0."""
+
+    @property
+    def prefix(self) -> int:
+        """Length of the compared prefix (a multiple of 8)."""
+        return 8 * len(self.mask)
 
     @property
     def k(self) -> int:
@@ -452,45 +458,28 @@ def joint_state_layout(data: bytes | memoryview) -> JointStateLayout:
     keep[4:12] = 0  # stamp
     keep[frame_at:names_at] = 0  # frame_id may vary within its padded length
     keep[starts[0]:] = 0
-    reference = np.frombuffer(data, np.uint8, count=prefix) & keep
-    return JointStateLayout(size, names, starts[0], starts[1], starts[2], reference, keep)
+    mask = keep.view('<u8').copy()
+    reference = np.frombuffer(data, '<u8', count=prefix // 8) & mask
+    return JointStateLayout(size, names, starts[0], starts[1], starts[2], reference, mask)
 
 
 @njit(cache=True, nogil=True)
-def _check_rows(
-    buf: npt.NDArray[np.uint8],
-    starts: IntArray,
-    reference: npt.NDArray[np.uint8],
-    keep: npt.NDArray[np.uint8],
-    counts_at: IntArray,
-    k: int,
-) -> tuple[BoolArray, IntArray]:  # pragma: no cover (compiled)
-    """Per message at ``buf[starts[i]:]``: do its prefix bytes equal ``reference`` where
-    ``keep`` is set, and the two later counts ``k``? And its stamp (ns). Branch-free over
-    the contiguous prefix, so that LLVM vectorises the compare."""
-    n = starts.shape[0]
-    width = reference.shape[0]
+def _rows_match(
+    words: npt.NDArray[np.uint64],
+    reference: npt.NDArray[np.uint64],
+    mask: npt.NDArray[np.uint64],
+) -> BoolArray:  # pragma: no cover (compiled)
+    """Per row of ``words`` (n, w): equal to ``reference`` wherever ``mask`` is set? One
+    branch-free pass over 8-byte words (about 1.5-4x numpy's masked compare here, which
+    needs two temporaries and a reduction along the rows)."""
+    n = words.shape[0]
     ok = np.empty(n, np.bool_)
-    stamps = np.empty(n, np.int64)
     for i in range(n):
-        s = starts[i]
-        acc = np.uint8(0)
-        for j in range(width):
-            acc |= (buf[s + j] ^ reference[j]) & keep[j]
-        good = acc == 0
-        for at in counts_at:
-            count = (np.int64(buf[s + at]) | np.int64(buf[s + at + 1]) << 8
-                     | np.int64(buf[s + at + 2]) << 16 | np.int64(buf[s + at + 3]) << 24)
-            good = good and count == k
-        ok[i] = good
-        sec = (np.int64(buf[s + 4]) | np.int64(buf[s + 5]) << 8
-               | np.int64(buf[s + 6]) << 16 | np.int64(buf[s + 7]) << 24)
-        if sec >= 2**31:
-            sec -= 2**32
-        nsec = (np.int64(buf[s + 8]) | np.int64(buf[s + 9]) << 8
-                | np.int64(buf[s + 10]) << 16 | np.int64(buf[s + 11]) << 24)
-        stamps[i] = sec * 1_000_000_000 + nsec
-    return ok, stamps
+        acc = np.uint64(0)
+        for j in range(words.shape[1]):
+            acc |= (words[i, j] ^ reference[j]) & mask[j]
+        ok[i] = acc == 0
+    return ok
 
 
 def decode_joint_state_rows(
@@ -506,9 +495,12 @@ def decode_joint_state_rows(
     garbage: decode those one by one. The caller guarantees ``buf`` holds every message.
     """
     k = layout.k
-    counts_at = np.array([layout.vel - 8, layout.eff - 8], np.int64)  # before their padding
-    ok, stamps = _check_rows(buf, starts, layout.reference, layout.keep, counts_at, k)
     rows = gather_rows(buf, starts, layout.size)
+    ok = _rows_match(rows[:, :layout.prefix].view('<u8'), layout.reference, layout.mask)
+    for at in (layout.vel, layout.eff):  # the two later counts (4 bytes before padding)
+        ok &= rows[:, at - 8:at - 4].view('<u4')[:, 0] == k
+    stamp = rows[:, 4:12].view('<i4')
+    stamps = stamp[:, 0].astype(np.int64) * _NS + stamp[:, 1].view('<u4')
     views = [rows[:, at:at + 8 * k].view('<f8') for at in (layout.pos, layout.vel, layout.eff)]
     return ok, stamps, views[0], views[1], views[2]
 
