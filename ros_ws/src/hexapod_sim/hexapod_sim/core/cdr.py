@@ -28,7 +28,6 @@ from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
 
 from . import topics as T
 from .errors import CdrError
@@ -463,25 +462,6 @@ def joint_state_layout(data: bytes | memoryview) -> JointStateLayout:
     return JointStateLayout(size, names, starts[0], starts[1], starts[2], reference, mask)
 
 
-@njit(cache=True, nogil=True)
-def _rows_match(
-    words: npt.NDArray[np.uint64],
-    reference: npt.NDArray[np.uint64],
-    mask: npt.NDArray[np.uint64],
-) -> BoolArray:  # pragma: no cover (compiled)
-    """Per row of ``words`` (n, w): equal to ``reference`` wherever ``mask`` is set? One
-    branch-free pass over 8-byte words (about 1.5-4x numpy's masked compare here, which
-    needs two temporaries and a reduction along the rows)."""
-    n = words.shape[0]
-    ok = np.empty(n, np.bool_)
-    for i in range(n):
-        acc = np.uint64(0)
-        for j in range(words.shape[1]):
-            acc |= (words[i, j] ^ reference[j]) & mask[j]
-        ok[i] = acc == 0
-    return ok
-
-
 def decode_joint_state_rows(
     buf: npt.NDArray[np.uint8],
     starts: IntArray,
@@ -496,7 +476,11 @@ def decode_joint_state_rows(
     """
     k = layout.k
     rows = gather_rows(buf, starts, layout.size)
-    ok = _rows_match(rows[:, :layout.prefix].view('<u8'), layout.reference, layout.mask)
+    # numpy, not a compiled loop: a numba kernel is ~1.5x faster per row, but loading it
+    # costs ~0.5 s of CPU per process, more than it saves on a 60 s bag (S6)
+    diff = rows[:, :layout.prefix].view('<u8') & layout.mask
+    diff ^= layout.reference
+    ok = np.bitwise_or.reduce(diff, axis=1) == 0
     for at in (layout.vel, layout.eff):  # the two later counts (4 bytes before padding)
         ok &= rows[:, at - 8:at - 4].view('<u4')[:, 0] == k
     stamp = rows[:, 4:12].view('<i4')
