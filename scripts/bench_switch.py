@@ -80,8 +80,8 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
     sim's status messages in ``bag``."""
     import numpy as np
 
-    from hexapod_metrics.core import cdr
-    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_sim.core import cdr
+    from hexapod_metrics.bag import open_bag
     from hexapod_sim.core import topics as T
 
     rows = []

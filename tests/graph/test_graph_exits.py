@@ -174,8 +174,8 @@ def test_fallback_alone_exits_7(script, tmp_path):
     assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
     assert_uncommanded_cycles_are_labelled(s, "pd_p")
     # the transition a ROS tool made is in the bag: the controller's status says it, at once
-    from hexapod_metrics.core import cdr
-    from hexapod_metrics.core.bag_reader import open_bag
+    from hexapod_sim.core import cdr
+    from hexapod_metrics.bag import open_bag
     from hexapod_sim.core import topics as T
 
     states = []

@@ -531,7 +531,9 @@ class JointStateDecoder:
         self.frame_log: list[tuple[int, str]] | None = None
         """Where the bag reader appends (stamp ns, frame_id) changes, if anyone asks."""
 
-    def frame_changes(self, buf: ByteArray, starts: IntArray, sizes: IntArray) -> list[tuple[int, str]]:
+    def frame_changes(
+        self, buf: ByteArray, starts: IntArray, sizes: IntArray,
+    ) -> list[tuple[int, str]]:
         """(row, frame_id) of every message whose header.frame_id differs from the message
         before it (across calls), vectorised: rows whose frame bytes equal the previous
         row's are skipped with one compare; only candidate rows are decoded."""
