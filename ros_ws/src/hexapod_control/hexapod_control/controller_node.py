@@ -10,7 +10,7 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
 Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
-is answered once the reference and the foot forces with the same stamp are there (both
+(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces with the same stamp are there (both
 architectures wait for the same set, so their timing is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
@@ -37,6 +37,7 @@ from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.msg_auth import AuthError
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
@@ -227,7 +228,7 @@ class ControllerNode(LifecycleNode):
             for buf in (self.refs, self.forces):
                 for s in [s for s in buf if s < keep]:
                     del buf[s]
-        if js.frame_id != self.arch or not self.active:
+        if in_charge(js.frame_id) != self.arch or not self.active:
             return
         self.last_state = stamp
         self.pending[stamp] = js

@@ -24,6 +24,7 @@ from rclpy.node import Node
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core.topics import TOPICS
 from hexapod_sim.core.errors import HexapodError, ParameterError
 from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
@@ -31,12 +32,11 @@ from hexapod_sim.param_topic import ParamAnnouncer
 from hexapod_sim.ros_params import declare_node_param
 
 from .core.msgdefs import lookup
-from .core.recording import TOPICS
 
 _STAMP = struct.Struct("<iI")
 #: Topics whose messages start with a std_msgs/Header (or are a Clock): stamp at byte 4.
-STAMPED = {t for t, (msgtype, _) in TOPICS.items()
-           if msgtype not in ("std_msgs/msg/String", "visualization_msgs/msg/MarkerArray")}
+STAMPED = {t for t, spec in TOPICS.items()
+           if spec.msg_type not in ("std_msgs/msg/String", "visualization_msgs/msg/MarkerArray")}
 
 
 def marker_stamp(data: bytes) -> int | None:
@@ -73,7 +73,8 @@ class FoxgloveBridge(Node):
         self.channels: dict[str, Any] = {}
         self.guard = InputGuard(self, self.log)  # forwards only the graph's own messages
         self.loop = HotLoop(self, batch_interval=batch)
-        for topic, (msgtype, _) in TOPICS.items():
+        for topic, spec in TOPICS.items():
+            msgtype = spec.msg_type
             definition = lookup(msgtype)
             assert definition is not None, msgtype
             schema = foxglove.Schema(name=msgtype, encoding="ros2msg",

@@ -84,6 +84,7 @@ from .core import topics as T
 from .core.actuator import saturate
 from .core.engine import Physics
 from .core.errors import DivergenceError, HexapodError, ParameterError
+from .core import labels as L
 from .core import msg_checks as M
 from .core.layout import O_THV, P_TMAX
 from .core.msg_auth import AuthError
@@ -178,6 +179,7 @@ class SimNode(Node):
         self.create_timer(STATUS_PERIOD, self._publish_status, clock=self.steady)
 
         self.in_charge = p.run.controller
+        self.source = L.COMMANDED  # of the torque acting now (core/labels.py)
         self.pending_controller: str | None = None
         self.pending_params: HexapodParams | None = None
         self.torque = np.zeros((N_LEGS, 2))
@@ -358,7 +360,10 @@ class SimNode(Node):
         cs = self.codecs
         out = []
         # Foot forces first: the controller needs them with the joint states that wake it.
-        for topic, frame in ((T.FOOT_FORCES, ""), (T.JOINT_STATES, self.in_charge),
+        # joint_states names the controller in charge and where its effort came from
+        # (core/labels.py: the bare name when the controller commanded it).
+        for topic, frame in ((T.FOOT_FORCES, ""),
+                             (T.JOINT_STATES, L.state_frame(self.in_charge, self.source)),
                              (T.HIP_STATES, "")):
             c = T.state_columns(obs, topic)
             out.append((self.pub[topic], self.signers[topic].sign(
@@ -499,7 +504,9 @@ class SimNode(Node):
         """Apply a command (None: hold the torque, or damp in fallback), integrate one period,
         apply what changes at the tick boundary, prepare the next tick's messages."""
         P = self.physics.P
+        self.source = L.COMMANDED
         if demand is None and self.started:
+            self.source = L.FALLBACK if self.fallback else L.HELD
             self._mark(self.not_commanded, self.physics.tick)
             if self.fallback:
                 self._mark(self.fallback_ranges, self.physics.tick)
