@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from graph.bag_checks import bag_qos  # tests/graph: the same check of graph bags
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.core import cdr
 from hexapod_metrics.core.analysis import analyze_bag
@@ -14,8 +15,6 @@ from hexapod_metrics.core.recording import write_run_bag
 from hexapod_sim.core import labels as L
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import load_params
-
-from graph.bag_checks import bag_qos  # tests/graph: the same check of graph bags
 
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 
@@ -83,7 +82,7 @@ def _messages(r, k: int, frame: str) -> dict[str, bytes]:
 
 
 def test_scorer_per_message_equals_the_engine_and_labels_held_ticks(clean_run) -> None:
-    p, r = clean_run
+    _p, r = clean_run
     n = 1000
     held = set(range(1500, 1510))  # torque ticks 1500..1509 "held" -> cycle 1 is mixed
     fallback = set(range(2000, 3000))  # all of cycle 2
@@ -149,7 +148,7 @@ def test_a_gap_gives_a_cycle_without_sums_and_scoring_goes_on(clean_run) -> None
 
 
 def test_simulate_bag_carries_the_topic_tables_qos(tmp_path: Path, clean_run) -> None:
-    p, r = clean_run
+    _p, r = clean_run
     bag = write_run_bag(r, tmp_path / "bag")
     assert bag_qos(bag) == {t: s.preset for t, s in T.TOPICS.items()
                             if t not in (T.STATUS, T.MARKERS)}

@@ -27,23 +27,21 @@ import sys
 from typing import Any
 
 import numpy as np
-import rclpy
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
+from hexapod_sim.core.params import N_LEGS, HexapodParams
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
-from rclpy.lifecycle import LifecycleState, Node as LifecycleNode, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.msg_auth import AuthError
-from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
 
@@ -267,33 +265,23 @@ class ControllerNode(LifecycleNode):
                     self.l2, self.demand)
 
 
-def _main(architecture: str, args: list[str] | None) -> int:
-    if not init_rclpy(args, f"{architecture}_controller"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = ControllerNode(architecture)
-        install_stop_signals(node.loop)
-        if node.autostart:
-            node.trigger_configure()
-            node.trigger_activate()
-        node.loop.spin()
-    except HexapodError as err:
-        rclpy.logging.get_logger(f"{architecture}_controller").error(str(err))
-        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                          f"their reference or foot forces); inputs: {node.guard.summary()}")
-            if node.pub is not None:
-                node.pub.wait_for_all_acked(Duration(seconds=1))
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
+def _start(node: ControllerNode) -> None:
+    if node.autostart:
+        node.trigger_configure()
+        node.trigger_activate()
+
+
+def _finish(node: ControllerNode, code: int) -> int:
+    node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
+                  f"their reference or foot forces); inputs: {node.guard.summary()}")
+    if node.pub is not None:
+        node.pub.wait_for_all_acked(Duration(seconds=1))
     return code
+
+
+def _main(architecture: str, args: list[str] | None) -> int:
+    return run_node(f"{architecture}_controller", lambda: ControllerNode(architecture), args,
+                    start=_start, finish=_finish)
 
 
 def main_pd_p(args: list[str] | None = None) -> int:

@@ -49,31 +49,28 @@ import time
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_sim.core.params import CONTROLLERS
+from hexapod_sim.core.topics import TICK_TOPICS, TOPICS
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.topics import TICK_TOPICS, TOPICS
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.msg_auth import AuthError
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
-from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core import cdr
 from .core.bag_writer import BagWriter
-from .core.errors import BagError, BagReadError, BagStorageError
 from .core.cycles import CYCLE_TOPICS, Cycle, CycleScorer, segments
+from .core.errors import BagError, BagReadError, BagStorageError
 from .core.indices import INDEX_NAMES, REPORTED_NAMES
 from .core.log_times import ControllerLogTimes, marker_array_stamp
 from .core.recording import ParamRecorder, indices_status
@@ -336,34 +333,15 @@ class MetricsNode(Node):
         self.log.error(f"recording stopped at sim time {self.clock_ns * 1e-9:.3f} s: {err}")
 
 
+def _finish(node: MetricsNode, code: int) -> int:
+    """Close the bag and write indices.json; a recording that failed exits 3."""
+    node.close()
+    return EXIT_RECORDING_FAILED if node.failure is not None else code
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``metrics``."""
-    if not init_rclpy(args, "metrics"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = MetricsNode()
-        install_stop_signals(node.loop)
-        node.loop.spin()
-        if node.failure is not None:
-            code = EXIT_RECORDING_FAILED
-    except (HexapodError, BagError) as err:
-        rclpy.logging.get_logger("metrics").error(str(err))
-        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            try:
-                node.close()
-                if node.failure is not None:
-                    code = EXIT_RECORDING_FAILED
-            finally:
-                node.loop.destroy()
-                node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("metrics", MetricsNode, args, finish=_finish, errors=(BagError,))
 
 
 if __name__ == "__main__":

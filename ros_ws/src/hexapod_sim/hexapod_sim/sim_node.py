@@ -68,11 +68,9 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy
@@ -80,19 +78,19 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from . import conversions as C
+from .core import labels as L
+from .core import msg_checks as M
 from .core import topics as T
 from .core.actuator import saturate
 from .core.engine import Physics
-from .core.errors import DivergenceError, HexapodError, ParameterError
-from .core import labels as L
-from .core import msg_checks as M
+from .core.errors import ParameterError
 from .core.layout import O_THV, P_TMAX
-from .core.msg_auth import AuthError
 from .core.params import N_LEGS, HexapodParams, check_controller
 from .core.switch_channel import ChannelError, SwitchServer
-from .hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from .param_topic import ParamAnnouncer
+from .hot_loop import FastLogger, HotLoop
 from .input_guard import InputGuard
+from .node_main import run_node
+from .param_topic import ParamAnnouncer
 from .ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
@@ -698,45 +696,24 @@ class SimNode(Node):
             pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
 
 
+def _finish(node: SimNode, code: int) -> int:
+    """The summary (log, status, ``summary_path``), the last messages acknowledged."""
+    if node.started:
+        node.log.info(node.summary())
+        node._publish_status()
+    try:
+        node.write_summary()
+    except OSError as err:
+        node.log.error(f"cannot write the summary to {node.summary_path}: {err}")
+    node.flush()
+    if node.channel is not None:
+        node.channel.close()
+    return code
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``hexapod_sim``."""
-    if not init_rclpy(args, "hexapod_sim"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = SimNode()
-        install_stop_signals(node.loop)
-        node.start()
-        node.loop.spin()
-    except (ParameterError, AuthError) as err:
-        rclpy.logging.get_logger("hexapod_sim").error(str(err))
-        code = 2
-    except DivergenceError as err:
-        if node is not None:
-            node.log.error(f"{err}: stopping")
-        code = 1
-    except HexapodError as err:
-        rclpy.logging.get_logger("hexapod_sim").error(str(err))
-        code = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            if node.started:
-                node.log.info(node.summary())
-                node._publish_status()
-            try:
-                node.write_summary()
-            except OSError as err:
-                node.log.error(f"cannot write the summary to {node.summary_path}: {err}")
-            node.flush()
-            if node.channel is not None:
-                node.channel.close()
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("hexapod_sim", SimNode, args, start=SimNode.start, finish=_finish)
 
 
 if __name__ == "__main__":

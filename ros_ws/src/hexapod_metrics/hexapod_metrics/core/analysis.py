@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.layout import O_HP, O_TQ
@@ -31,8 +30,8 @@ from hexapod_sim.core.params import HexapodParams
 from .bag_params import bag_params
 from .bag_reader import Bag, iter_joint_state_blocks, open_bag
 from .cdr import decode_diagnostic_array
-from .errors import BagReadError
 from .cycles import CYCLE_TOPICS, Cycle, CycleScorer
+from .errors import BagReadError
 from .indices import Indices
 from .recording import status_indices
 
@@ -251,5 +250,14 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
     return out
 
 
-__all__ = ["BagAnalysis", "CycleResult", "SegmentResult", "analyze_bag", "label_ticks",
-           "controller_changes", "online_indices", "ticks_of_changes", "with_param_boundaries"]
+__all__ = [
+    "BagAnalysis",
+    "CycleResult",
+    "SegmentResult",
+    "analyze_bag",
+    "controller_changes",
+    "label_ticks",
+    "online_indices",
+    "ticks_of_changes",
+    "with_param_boundaries",
+]

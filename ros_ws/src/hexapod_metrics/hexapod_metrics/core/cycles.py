@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-
 from hexapod_sim.core import labels as L
 from hexapod_sim.core import topics as T
 

@@ -10,7 +10,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
 from hexapod_control.core.closed_loop import RunResult
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import state_frame
@@ -156,6 +155,17 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     return path
 
 
-__all__ = ["PARAMS_KEY", "RECORDS_KEY", "SIMULATE_NODE", "SIM_NODE", "TICK_TOPICS", "TOPICS",
-           "ParamRecorder", "param_status", "indices_status", "params_from_custom_data",
-           "status_indices", "write_run_bag"]
+__all__ = [
+    "PARAMS_KEY",
+    "RECORDS_KEY",
+    "SIMULATE_NODE",
+    "SIM_NODE",
+    "TICK_TOPICS",
+    "TOPICS",
+    "ParamRecorder",
+    "indices_status",
+    "param_status",
+    "params_from_custom_data",
+    "status_indices",
+    "write_run_bag",
+]
