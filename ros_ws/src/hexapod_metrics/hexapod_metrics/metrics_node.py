@@ -104,8 +104,11 @@ class MetricsNode(Node):
         max_duration = declare_node_param(self, "max_bag_duration", 0.0,
                                           "sim s per MCAP file before a new one starts (0: one)")
         self.period = p.sim.control_period
+        # The recorder takes its queues topic by topic and may lag by seconds: a cycle waits
+        # for its slowest topic (as offline), and is given up only if a topic stays 10 cycles
+        # behind the others (dead; memory stays bounded).
         n = int(round(p.cycle_time / self.period))
-        self.scorer = CycleScorer(n, self.period, gap_ticks=n)
+        self.scorer = CycleScorer(n, self.period, gap_ticks=10 * n)
         self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"},
                                 flush_interval_s=0.5, sync_topics=TICK_TOPICS,
                                 follow_topics=(T.MARKERS,),

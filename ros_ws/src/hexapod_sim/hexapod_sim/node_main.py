@@ -53,6 +53,7 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
         return EXIT_BAD_SETTINGS
     node: N | None = None
     code = 0
+    caught: tuple[type[Exception], ...] = (HexapodError, *errors)
     try:
         node = make()
         install_stop_signals(node.loop)
@@ -62,7 +63,7 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
     except DivergenceError as err:
         rclpy.logging.get_logger(name).error(f"{err}: stopping")
         code = EXIT_ERROR
-    except (HexapodError, *errors) as err:
+    except caught as err:
         rclpy.logging.get_logger(name).error(str(err))
         code = exit_code(err)
     except (KeyboardInterrupt, ExternalShutdownException):

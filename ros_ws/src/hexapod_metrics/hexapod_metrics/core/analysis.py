@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.layout import O_HP, O_TQ
@@ -32,7 +33,7 @@ from .bag_reader import Bag, iter_joint_state_blocks, open_bag
 from .cdr import decode_diagnostic_array
 from .cycles import CYCLE_TOPICS, Cycle, CycleScorer
 from .errors import BagReadError
-from .indices import Indices
+from .indices import Indices, WindowSums
 from .recording import status_indices
 
 STREAMS = CYCLE_TOPICS
@@ -139,7 +140,8 @@ def online_indices(bag: Bag) -> list[tuple[int, str, Indices]]:
     return [r for _, _, raw in bag.messages([T.INDICES]) for r in _online_records(raw)]
 
 
-def label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
+def label_ticks(changes: list[tuple[int, str]], ticks: npt.ArrayLike) -> np.ndarray:
+    """The controller of each tick from (first tick, controller) changes."""
     starts = np.array([k for k, _ in changes], dtype=np.int64)
     names = np.array([c for _, c in changes] or ["unknown"], dtype=object)
     pos = np.searchsorted(starts, ticks, side="right") - 1

@@ -5,7 +5,8 @@ JointStates (the node, ``simulate --bag``) or as decoded blocks (the bag reader)
 controller labels come from joint_states' frame_id (``hexapod_sim.core.labels``). Gait
 cycle c spans ticks k_a = c M .. k_b = (c + 1) M (M = T / Delta t) and is scored
 (:func:`~.indices.sums_from_obs`, samples 1..M, as the engine) once every topic has
-reached k_b, or once a topic is a whole cycle past it (a gap: the cycle has no sums). The
+reached k_b (a tick missing in it: the cycle has no sums), or, live, once a topic is far past
+it while another has not reached it (a dead topic). The
 first cycle is the first one that starts at or after the first tick seen. Memory: about one
 cycle of samples.
 """
