@@ -184,25 +184,22 @@ class ControllerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     # ------------------------------------------------------------------ per tick
-    def _on_reference(self, data: bytes) -> None:
-        ref = self.guard.joint_state(T.REFERENCE, data, self.period_ns, self.window)
-        if ref is None:
+    def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
+        """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED)."""
+        msg = self.guard.joint_state(topic, data, self.period_ns, self.window)
+        if msg is None:
             return
-        self.refs[ref.stamp_ns] = ref
-        if len(self.refs) > MAX_BUFFERED:
-            del self.refs[min(self.refs)]
-        if ref.stamp_ns in self.pending:
+        buf[msg.stamp_ns] = msg
+        if len(buf) > MAX_BUFFERED:
+            del buf[min(buf)]
+        if msg.stamp_ns in self.pending:
             self._answer()
 
+    def _on_reference(self, data: bytes) -> None:
+        self._on_input(T.REFERENCE, self.refs, data)
+
     def _on_forces(self, data: bytes) -> None:
-        ff = self.guard.joint_state(T.FOOT_FORCES, data, self.period_ns, self.window)
-        if ff is None:
-            return
-        self.forces[ff.stamp_ns] = ff
-        if len(self.forces) > MAX_BUFFERED:
-            del self.forces[min(self.forces)]
-        if ff.stamp_ns in self.pending:
-            self._answer()
+        self._on_input(T.FOOT_FORCES, self.forces, data)
 
     def _on_state(self, data: bytes) -> None:
         """A state: ours to answer if it names this controller (and we are active).

@@ -126,7 +126,7 @@ class SimNode(Node):
         self.prepared: tuple[int, int, list[tuple[Any, bytes]]] = (0, 0, [])
         self._rtf = (time.monotonic(), 0)
         self.rtf = 0.0
-        # Start values now; changes at the tick boundary that applies them (_step).
+        # Start values now; changes at the tick boundary that applies them (ready()).
         self.announcer = ParamAnnouncer(self, self.period, deferred=True)
 
     # ------------------------------------------------------------------ helpers
