@@ -10,8 +10,9 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
 Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
-(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces with the same stamp are there (both
-architectures wait for the same set, so their timing is the same): the demanded torque
+(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces
+with the same stamp are there (both architectures wait for the same set, so their timing
+is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
 ``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the

@@ -363,7 +363,8 @@ def fill_obs(obs: np.ndarray, topic: str, position: np.ndarray, velocity: np.nda
 
 __all__ = [
     "CODECS", "CONTROL_DEPTH", "ENCAPSULATION", "HISTORY_DEPTH", "JointStateCodec",
-    "MSG_CLASSES", "JointStateLayout", "JointStateView", "LEVELS", "NS", "RECORD_DEPTH", "Status", "TOPIC_QOS",
+    "MSG_CLASSES", "JointStateLayout", "JointStateView", "LEVELS", "NS", "RECORD_DEPTH",
+    "Status", "TOPIC_QOS",
     "TopicQos", "clock", "columns", "decode_stamp", "decode_string", "diagnostic_array",
     "encode_clock", "encode_string", "fill_obs", "from_time", "joint_state",
     "joint_state_layout", "statuses", "string", "tick_of", "to_time",

@@ -399,19 +399,20 @@ class SimNode(Node):
     # ------------------------------------------------------------------ status
     def status(self) -> C.Status:
         """The sim's diagnostic status (also logged as the summary)."""
+        m = self.ticks
         now = time.monotonic()
-        k = self.ticks.tick
+        k = m.tick
         last_wall, last_tick = self._rtf
         if now - last_wall > 1e-3:
             self.rtf = (k - last_tick) * self.period / (now - last_wall)
         self._rtf = (now, k)
-        if not self.ticks.started:
+        if not m.started:
             level, msg = "warn", "waiting for the graph"
-        elif self.ticks.fallback:
-            level, msg = "error", f"{self.ticks.in_charge} silent: joint damping fallback"
-        elif self.ticks.silent_ticks:
-            level, msg = "warn", f"{self.ticks.in_charge} silent: holding the last torque"
-        elif self.ticks.finished:
+        elif m.fallback:
+            level, msg = "error", f"{m.in_charge} silent: joint damping fallback"
+        elif m.silent_ticks:
+            level, msg = "warn", f"{m.in_charge} silent: holding the last torque"
+        elif m.finished:
             level, msg = "ok", "finished"
         else:
             level, msg = "ok", "running"
@@ -419,42 +420,42 @@ class SimNode(Node):
             level, msg = "warn", f"{msg}; {self.guard.drops.summary()}"
         values = {
             "mode": self.mode, "sim_time": f"{k * self.period:.6f}", "tick": str(k),
-            "controller": self.ticks.in_charge, "missed_ticks": str(self.ticks.missed),
-            "late_ticks": str(self.ticks.late), "on_time_ticks": str(self.ticks.on_time),
-            "fallback": "on" if self.ticks.fallback else "off",
-            "fallback_episodes": str(self.ticks.fallback_episodes),
-            "switches": str(self.ticks.switches), "missed_after_switch": str(self.ticks.missed_after_switch),
+            "controller": m.in_charge, "missed_ticks": str(m.missed),
+            "late_ticks": str(m.late), "on_time_ticks": str(m.on_time),
+            "fallback": "on" if m.fallback else "off",
+            "fallback_episodes": str(m.fallback_episodes),
+            "switches": str(m.switches), "missed_after_switch": str(m.missed_after_switch),
             "real_time_factor": f"{self.rtf:.3f}",
-            "resyncs": str(self.ticks.resyncs), "end_tick": str(self.ticks.end_tick),
-            "round_trip_median_ms": f"{self.ticks.latency_ms(0.5):.3f}",
-            "round_trip_p99_ms": f"{self.ticks.latency_ms(0.99):.3f}",
+            "resyncs": str(m.resyncs), "end_tick": str(m.end_tick),
+            "round_trip_median_ms": f"{m.latency_ms(0.5):.3f}",
+            "round_trip_p99_ms": f"{m.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
-            "foreign_commands": str(self.ticks.foreign), **self.guard.values(),
+            "foreign_commands": str(m.foreign), **self.guard.values(),
         }
         return C.Status("hexapod_sim", level, msg, values)
 
     def _publish_status(self) -> None:
         self.guard.refresh()
-        msg: DiagnosticArray = C.diagnostic_array(self.ticks.stamp if self.ticks.stamp >= 0 else 0,
-                                                  [self.status()])
+        msg: DiagnosticArray = C.diagnostic_array(max(self.ticks.stamp, 0), [self.status()])
         self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], msg))
 
     def summary(self) -> str:
         """One line: what ran, how many ticks were missed or late."""
-        k = self.ticks.tick
-        wall = time.monotonic() - self.ticks.wall_start if self.ticks.started else 0.0
+        m = self.ticks
+        k = m.tick
+        wall = time.monotonic() - m.wall_start if m.started else 0.0
         rtf = k * self.period / wall if wall > 0 else 0.0
         return (f"stopped at tick {k} (t = {k * self.period:.3f} s) in {self.mode} mode: "
-                f"{self.ticks.missed} missed, {self.ticks.late} late, {self.ticks.on_time} on time (realtime), "
-                f"{self.ticks.fallback_episodes} fallback episodes, {self.ticks.switches} switches "
-                f"({self.ticks.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
-                f"{self.ticks.resyncs} resyncs; round trip median {self.ticks.latency_ms(0.5):.2f} ms, p99 "
-                f"{self.ticks.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}; "
-                f"{self.ticks.foreign} commands from a controller not in charge; inputs: "
+                f"{m.missed} missed, {m.late} late, {m.on_time} on time (realtime), "
+                f"{m.fallback_episodes} fallback episodes, {m.switches} switches "
+                f"({m.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
+                f"{m.resyncs} resyncs; round trip median {m.latency_ms(0.5):.2f} ms, p99 "
+                f"{m.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}; "
+                f"{m.foreign} commands from a controller not in charge; inputs: "
                 f"{self.guard.summary()}")
 
     def write_summary(self) -> None:
-        """Write :meth:`summary_doc` to ``summary_path`` (atomically), if set."""
+        """Write the machine's ``summary_doc`` to ``summary_path`` (atomically), if set."""
         if not self.summary_path:
             return
         import json

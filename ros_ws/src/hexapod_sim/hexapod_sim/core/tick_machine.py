@@ -2,9 +2,9 @@
 
 ROS-free (the node, sim_node.py, publishes and receives; this decides). Per tick k the shell
 publishes the sample of tick k (:meth:`TickMachine.sample`) between :meth:`sending` and
-:meth:`sent` (which says until when to wait), and passes every command (:meth:`command`) and every expired wait
-(:meth:`timeout` in lockstep, :meth:`period_end` in realtime) on. Times are wall seconds
-(``time.monotonic``), stamps integer nanoseconds of simulated time.
+:meth:`sent` (which says until when to wait), and passes every command (:meth:`command`)
+and every expired wait (:meth:`timeout` in lockstep, :meth:`period_end` in realtime) on.
+Times are wall seconds (``time.monotonic``), stamps integer nanoseconds of simulated time.
 
 * lockstep: tick k+1 is computed as soon as the command of tick k is applied; without it
   within ``sim.lockstep_timeout`` the tick is *missed* and the last torque *held*; while the
