@@ -58,6 +58,7 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
     from hexapod_metrics.bag import open_bag
     from hexapod_sim import conversions as C
     from hexapod_sim.core import topics as T
+    from hexapod_sim.core.labels import in_charge
 
     frames: dict[str, dict[int, str]] = {T.JOINT_STATES: {}, T.JOINT_COMMANDS: {}}
     with open_bag(bag) as b:
@@ -65,7 +66,8 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
             codec = C.CODECS[topic]
             for _, _, data in b.messages([topic]):
                 msg = codec.decode(bytes(data))
-                out[C.tick_of(msg.stamp_ns, period_ns)] = msg.frame_id
+                # the states' frame_id also says whether the torque was held (core/labels.py)
+                out[C.tick_of(msg.stamp_ns, period_ns)] = in_charge(msg.frame_id)
     states, commands = frames[T.JOINT_STATES], frames[T.JOINT_COMMANDS]
     n = max(states)
     switches = at if at is not None else [k for k in range(1, n + 1)

@@ -105,3 +105,28 @@ def check_indexed_ordered_bag(bag: Path, missed: int = 0) -> dict[str, list[int]
     for topic, n in seen["stats"].items():
         assert n - in_last.get(topic, 0) <= listed.get(topic, 0) <= n, (topic, n, listed)
     return {t: by_topic[t] for t in TICK_TOPICS}
+
+
+def bag_qos(bag: Path) -> dict[str, str]:
+    """topic -> durability of the offered QoS in metadata.yaml and in the MCAP's channels
+    (read by rosbags), which must agree."""
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    out = {}
+    for t in meta["topics_with_message_count"]:
+        md = t["topic_metadata"]
+        qos = md["offered_qos_profiles"]
+        if isinstance(qos, str):
+            qos = yaml.safe_load(qos)
+        durability = {q["durability"] for q in qos}
+        assert len(durability) == 1, md
+        d = durability.pop()
+        out[md["name"]] = "transient_local" if d in ("transient_local", 1) else "reliable"
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag]) as reader:
+        for c in reader.connections:
+            want = out[c.topic]
+            durability = {str(q.durability).lower() for q in c.ext.offered_qos_profiles}
+            assert any(want.split("_")[0] in d for d in durability) or (
+                want == "reliable" and any("volatile" in d for d in durability)), (c, want)
+    return out

@@ -42,6 +42,7 @@ from visualization_msgs.msg import MarkerArray
 
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.msg_auth import TRAILER_BYTES, Signer, run_key
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 
@@ -130,7 +131,7 @@ class Hostile:
         return serialize_message(cmd)
 
     def _rogue_on_state(self, msg: JointState, raw: bytes) -> None:
-        stamp, frame = msg.header.stamp, msg.header.frame_id
+        stamp, frame = msg.header.stamp, in_charge(msg.header.frame_id)
         self.send(T.JOINT_COMMANDS, self._command(stamp, frame, 80.0), "stamp-copying command")
         fake = JointState(header=msg.header, name=msg.name, velocity=msg.velocity,
                           effort=msg.effort, position=[p + 0.1 for p in msg.position])
@@ -160,10 +161,11 @@ class Hostile:
         st = self.last_state
         if st is None:
             return
-        self.send(T.JOINT_COMMANDS, self._command(st.header.stamp, st.header.frame_id, 80.0),
+        frame = in_charge(st.header.frame_id)
+        self.send(T.JOINT_COMMANDS, self._command(st.header.stamp, frame, 80.0),
                   "constant stale command")
         if self.rng.random() < 0.05:
-            other = "pd_p" if st.header.frame_id == "pd_pf" else "pd_pf"
+            other = "pd_p" if frame == "pd_pf" else "pd_pf"
             self.send(T.ACTIVE_CONTROLLER, serialize_message(String(data=other)),
                       "forged controller")
             for raw in list(self.genuine[T.ACTIVE_CONTROLLER])[-1:]:

@@ -156,6 +156,15 @@ def assert_uncommanded_cycles_are_labelled(s: Script, controller: str) -> None:
     assert row.split()[0] == last["label"], row
     if last["uncommanded_ticks"]:
         assert row.split()[0] in ("fallback", "held") or row.startswith(f"mixed({controller}+")
+    # The bag says the same: `hexapod analyze` labels each cycle as the metrics node did
+    # online (its /hexapod/indices records in the bag) and as indices.json.
+    from hexapod_metrics.core.analysis import analyze_bag
+
+    a = analyze_bag(s.bag)
+    offline = {c.cycle: (c.controller, c.uncommanded) for c in a.cycles if c.sums is not None}
+    assert offline == {c["cycle"]: (c["label"], c["uncommanded_ticks"]) for c in cycles}
+    assert {c: label for c, label, _ in a.online} == {c: v[0] for c, v in offline.items()}
+    assert any(label != controller for label, _ in offline.values())
 
 
 def test_fallback_alone_exits_7(script, tmp_path):

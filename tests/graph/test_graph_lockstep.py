@@ -14,6 +14,7 @@ from hexapod_metrics.core.simulate import simulate
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import load_params
 
+from .bag_checks import bag_qos
 from .conftest import sim_summary
 
 DURATION = 3.0
@@ -52,6 +53,14 @@ def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make
         assert np.array_equal(cmd.stamps[:n - 1], np.arange(n - 1) * 1_000_000)
         np.testing.assert_allclose(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command,
                                    rtol=0, atol=1e-9)
+
+    # One topic table: the graph's bag carries the same QoS as `simulate --bag`'s.
+    from hexapod_metrics.core.recording import write_run_bag
+
+    sim_bag = write_run_bag(ref, tmp_path / "simulated")
+    graph_qos, sim_qos = bag_qos(bag), bag_qos(sim_bag)
+    assert {t: q for t, q in graph_qos.items() if t in sim_qos} == sim_qos
+    assert graph_qos == {t: s.preset for t, s in T.TOPICS.items() if t in graph_qos}
 
     # The independent reader: every topic with the expected type and count.
     from rosbags.highlevel import AnyReader

@@ -7,6 +7,7 @@ import pytest
 from hexapod_metrics.bag import open_bag
 from hexapod_sim import conversions as C
 from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
 
 from .conftest import call, hexapod_cli, ros_client, sim_summary
 
@@ -14,12 +15,13 @@ ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
 
 
 def frames_by_tick(bag, topic: str, period_ns: int) -> dict[int, str]:
-    """tick -> header.frame_id of every message of ``topic`` (the last one per tick)."""
+    """tick -> the controller named by the header.frame_id of every message of ``topic``
+    (the last one per tick; states name it by the one labelling rule, core/labels.py)."""
     codec = C.CODECS[topic]
     out = {}
     for _, _, data in bag.messages([topic]):
         msg = codec.decode(bytes(data))
-        out[C.tick_of(msg.stamp_ns, period_ns)] = msg.frame_id
+        out[C.tick_of(msg.stamp_ns, period_ns)] = in_charge(msg.frame_id)
     return out
 
 

@@ -10,8 +10,9 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
 Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
-is answered once the reference and the foot forces with the same stamp are there (both
-architectures wait for the same set, so their timing is the same): the demanded torque
+(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces
+with the same stamp are there (both architectures wait for the same set, so their timing
+is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
 ``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the
@@ -27,22 +28,21 @@ import sys
 from typing import Any
 
 import numpy as np
-import rclpy
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
+from hexapod_sim.core.params import N_LEGS, HexapodParams
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
-from rclpy.lifecycle import LifecycleState, Node as LifecycleNode, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.core.msg_auth import AuthError
-from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 from .core.controllers import control_law, controller_code, gain_vector
 
@@ -185,25 +185,22 @@ class ControllerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     # ------------------------------------------------------------------ per tick
-    def _on_reference(self, data: bytes) -> None:
-        ref = self.guard.joint_state(T.REFERENCE, data, self.period_ns, self.window)
-        if ref is None:
+    def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
+        """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED)."""
+        msg = self.guard.joint_state(topic, data, self.period_ns, self.window)
+        if msg is None:
             return
-        self.refs[ref.stamp_ns] = ref
-        if len(self.refs) > MAX_BUFFERED:
-            del self.refs[min(self.refs)]
-        if ref.stamp_ns in self.pending:
+        buf[msg.stamp_ns] = msg
+        if len(buf) > MAX_BUFFERED:
+            del buf[min(buf)]
+        if msg.stamp_ns in self.pending:
             self._answer()
 
+    def _on_reference(self, data: bytes) -> None:
+        self._on_input(T.REFERENCE, self.refs, data)
+
     def _on_forces(self, data: bytes) -> None:
-        ff = self.guard.joint_state(T.FOOT_FORCES, data, self.period_ns, self.window)
-        if ff is None:
-            return
-        self.forces[ff.stamp_ns] = ff
-        if len(self.forces) > MAX_BUFFERED:
-            del self.forces[min(self.forces)]
-        if ff.stamp_ns in self.pending:
-            self._answer()
+        self._on_input(T.FOOT_FORCES, self.forces, data)
 
     def _on_state(self, data: bytes) -> None:
         """A state: ours to answer if it names this controller (and we are active).
@@ -227,7 +224,7 @@ class ControllerNode(LifecycleNode):
             for buf in (self.refs, self.forces):
                 for s in [s for s in buf if s < keep]:
                     del buf[s]
-        if js.frame_id != self.arch or not self.active:
+        if in_charge(js.frame_id) != self.arch or not self.active:
             return
         self.last_state = stamp
         self.pending[stamp] = js
@@ -266,33 +263,23 @@ class ControllerNode(LifecycleNode):
                     self.l2, self.demand)
 
 
-def _main(architecture: str, args: list[str] | None) -> int:
-    if not init_rclpy(args, f"{architecture}_controller"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = ControllerNode(architecture)
-        install_stop_signals(node.loop)
-        if node.autostart:
-            node.trigger_configure()
-            node.trigger_activate()
-        node.loop.spin()
-    except HexapodError as err:
-        rclpy.logging.get_logger(f"{architecture}_controller").error(str(err))
-        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                          f"their reference or foot forces); inputs: {node.guard.summary()}")
-            if node.pub is not None:
-                node.pub.wait_for_all_acked(Duration(seconds=1))
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
+def _start(node: ControllerNode) -> None:
+    if node.autostart:
+        node.trigger_configure()
+        node.trigger_activate()
+
+
+def _finish(node: ControllerNode, code: int) -> int:
+    node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
+                  f"their reference or foot forces); inputs: {node.guard.summary()}")
+    if node.pub is not None:
+        node.pub.wait_for_all_acked(Duration(seconds=1))
     return code
+
+
+def _main(architecture: str, args: list[str] | None) -> int:
+    return run_node(f"{architecture}_controller", lambda: ControllerNode(architecture), args,
+                    start=_start, finish=_finish)
 
 
 def main_pd_p(args: list[str] | None = None) -> int:

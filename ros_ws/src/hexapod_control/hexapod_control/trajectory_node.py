@@ -16,22 +16,20 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-import rclpy
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import ParameterError
+from hexapod_sim.core.gait import Reference, reference
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.core.msg_auth import AuthError
-from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
 MAX_GAP = 10000  # ticks of missed clock messages filled in at most
@@ -105,29 +103,15 @@ class TrajectoryNode(Node):
             self._block(last // BLOCK_TICKS + 1)
 
 
+def _finish(node: TrajectoryNode, code: int) -> int:
+    node.log.info(f"stopping; inputs: {node.guard.summary()}")
+    node.pub.wait_for_all_acked(Duration(seconds=1))
+    return code
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``trajectory_generator``."""
-    if not init_rclpy(args, "trajectory_generator"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = TrajectoryNode()
-        install_stop_signals(node.loop)
-        node.loop.spin()
-    except HexapodError as err:
-        rclpy.logging.get_logger("trajectory_generator").error(str(err))
-        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.log.info(f"stopping; inputs: {node.guard.summary()}")
-            node.pub.wait_for_all_acked(Duration(seconds=1))
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("trajectory_generator", TrajectoryNode, args, finish=_finish)
 
 
 if __name__ == "__main__":

@@ -18,25 +18,24 @@ import struct
 import sys
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.topics import TOPICS
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import declare_node_param
 from rclpy.node import Node
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.errors import HexapodError, ParameterError
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import declare_node_param
 
 from .bag.msgdefs import lookup
-from .core.recording import TOPICS
 
 _STAMP = struct.Struct("<iI")
 #: Topics whose messages start with a std_msgs/Header (or are a Clock): stamp at byte 4.
-STAMPED = {t for t, (msgtype, _) in TOPICS.items()
-           if msgtype not in ("std_msgs/msg/String", "visualization_msgs/msg/MarkerArray")}
+STAMPED = {t for t, spec in TOPICS.items()
+           if spec.msg_type not in ("std_msgs/msg/String", "visualization_msgs/msg/MarkerArray")}
 
 
 def marker_stamp(data: bytes) -> int | None:
@@ -73,7 +72,8 @@ class FoxgloveBridge(Node):
         self.channels: dict[str, Any] = {}
         self.guard = InputGuard(self, self.log)  # forwards only the graph's own messages
         self.loop = HotLoop(self, batch_interval=batch)
-        for topic, (msgtype, _) in TOPICS.items():
+        for topic, spec in TOPICS.items():
+            msgtype = spec.msg_type
             definition = lookup(msgtype)
             assert definition is not None, msgtype
             schema = foxglove.Schema(name=msgtype, encoding="ros2msg",
@@ -117,28 +117,14 @@ class FoxgloveBridge(Node):
         self.log.info(f"Foxglove server stopped ({self.sent} messages forwarded)")
 
 
+def _finish(node: FoxgloveBridge, code: int) -> int:
+    node.close()
+    return code
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``foxglove_bridge``."""
-    if not init_rclpy(args, "foxglove_bridge"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = FoxgloveBridge()
-        install_stop_signals(node.loop)
-        node.loop.spin()
-    except HexapodError as err:
-        rclpy.logging.get_logger("foxglove_bridge").error(str(err))
-        code = 2 if isinstance(err, ParameterError) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.close()
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("foxglove_bridge", FoxgloveBridge, args, finish=_finish)
 
 
 if __name__ == "__main__":

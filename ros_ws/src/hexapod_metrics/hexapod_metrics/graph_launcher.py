@@ -405,9 +405,7 @@ class Launcher:
                                  f"episode(s): joint damping from tick "
                                  f"{ranges[0][0] if ranges else '?'} (the controller in "
                                  f"charge went silent)")
-        if summary is not None:
-            label_indices_file(self.bag / "indices.json", summary)
-        lines += indices_lines(self.bag / "indices.json", summary)
+        lines += indices_lines(self.bag / "indices.json")
         return lines
 
     def cleanup(self) -> None:
@@ -426,55 +424,15 @@ def _how(code: int | None) -> str:
     return f"exited with code {code}"
 
 
-def _overlap(ranges: list[list[int]], a: int, b: int) -> int:
-    """Ticks of [a, b) inside the [lo, hi) ``ranges``."""
-    return sum(max(0, min(b, hi) - max(a, lo)) for lo, hi in ranges)
-
-
-def cycle_label(controller: str, t_a: float, t_b: float, period: float,
-                summary: dict[str, Any] | None) -> str:
-    """``controller``, or ``fallback`` / ``mixed(controller+N held)`` when some of the
-    cycle's torques were not commanded by it (the sample k carries the torque of tick k-1)."""
-    if summary is None:
-        return controller
-    a, b = round(t_a / period), round(t_b / period)
-    held = _overlap(summary.get("not_commanded_ticks", []), a, b)
-    damped = _overlap(summary.get("fallback_ticks", []), a, b)
-    if held == 0:
-        return controller
-    if held >= b - a:
-        return "fallback" if damped else "held"
-    return f"mixed({controller}+{held} uncommanded)"
-
-
-def label_indices_file(path: Path, summary: dict[str, Any]) -> None:
-    """Add ``label`` (:func:`cycle_label`) and ``uncommanded_ticks`` to every cycle of
-    ``indices.json``, so that the file, too, never credits a controller with torques it did
-    not command; rewritten atomically. A missing or unreadable file is left alone."""
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return
-    period = doc["control_period"]
-    cycles = list(doc.get("cycles", [])) + [s["last_full_cycle"] for s in doc["segments"]
-                                             if s.get("last_full_cycle")]
-    for c in cycles:
-        a, b = round(c["t_a"] / period), round(c["t_b"] / period)
-        c["uncommanded_ticks"] = _overlap(summary.get("not_commanded_ticks", []), a, b)
-        c["label"] = cycle_label(c["controller"], c["t_a"], c["t_b"], period, summary)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=1))
-    os.replace(tmp, path)
-
-
-def indices_lines(path: Path, summary: dict[str, Any] | None) -> list[str]:
-    """The table of indices per controller segment from ``indices.json``."""
+def indices_lines(path: Path) -> list[str]:
+    """The table of indices per controller segment from ``indices.json``, each cycle under
+    the metrics node's label (``hexapod_sim.core.labels``: ``fallback``, ``held`` or
+    ``mixed(...)`` when the controller in charge did not command all its torques)."""
     try:
         doc = json.loads(path.read_text())
     except (OSError, ValueError):
         return [f"run_graph: no indices.json in {path.parent} (see the metrics log)"]
     names = doc["index_names"]
-    period = doc["control_period"]
     out = ["indices per controller segment (last full gait cycle of each):",
            f"  {'controller':<24} {'segment [s]':<16} {'cycle [s]':<12}"
            + "".join(f"{n:>11}" for n in names)]
@@ -484,7 +442,7 @@ def indices_lines(path: Path, summary: dict[str, Any] | None) -> list[str]:
         if c is None:
             out.append(f"  {s['controller']:<24} {seg:<16} no full gait cycle")
             continue
-        label = cycle_label(s["controller"], c["t_a"], c["t_b"], period, summary)
+        label = c.get("label", s["controller"])
         row = "".join(f"{c['indices'][n]:>11.4g}" for n in names)
         out.append(f"  {label:<24} {seg:<16} {'[%g, %g]' % (c['t_a'], c['t_b']):<12}{row}")
     return out

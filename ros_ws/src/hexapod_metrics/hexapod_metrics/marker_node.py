@@ -14,24 +14,21 @@ import sys
 import time
 
 import numpy as np
-import rclpy
 from builtin_interfaces.msg import Duration as DurationMsg
 from geometry_msgs.msg import Point
-from rclpy.executors import ExternalShutdownException
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.layout import OBS_SHAPE
+from hexapod_sim.hot_loop import HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import declare_node_param, declare_params
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.layout import OBS_SHAPE
-from hexapod_sim.core.errors import HexapodError
-from hexapod_sim.hot_loop import HotLoop, install_stop_signals
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.ros_params import declare_node_param, declare_params
 
 from .core.figure import FORCE_SCALE, side, stick_figure
 
@@ -164,23 +161,7 @@ class MarkerNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``markers``."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = MarkerNode()
-        install_stop_signals(node.loop)
-        node.loop.spin()
-    except HexapodError as err:
-        rclpy.logging.get_logger("markers").error(str(err))
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.loop.destroy()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("markers", MarkerNode, args)
 
 
 if __name__ == "__main__":

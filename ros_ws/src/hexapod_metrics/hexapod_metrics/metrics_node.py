@@ -34,14 +34,12 @@ reason goes out on ``/hexapod/status``, and the node exits with code
 :data:`EXIT_RECORDING_FAILED` (3). Other exit codes: 0 clean, 1 other error, 2 bad
 parameters.
 
-Indices: the seven indices (:func:`hexapod_metrics.core.indices.compute_indices`) of each gait
-cycle c, over the ticks k_a = c N .. k_b = (c + 1) N with N = T / Delta t (the sums run
-over samples 1..N, as in the in-process evaluation, see ``core/simulate.py``), are
-published on ``/hexapod/indices`` (one ``DiagnosticStatus`` per cycle, with the controller
-that produced the cycle's torques, or ``a->b`` if a switch fell inside it) and written to
-the bag. At close, ``indices.json`` in the bag directory lists every cycle and, per
-controller segment (a run of ticks with one controller in charge, from the states'
-frame_id), its full cycles and the last of them: the figure the paper reports.
+Indices: the one cycle scorer (:mod:`~hexapod_metrics.core.cycles`) scores each gait cycle;
+each is published on ``/hexapod/indices`` and written to the bag, labelled with the controller
+only if it commanded every torque of the cycle (``hexapod_sim.core.labels``: else
+``mixed(...)``, ``held`` or ``fallback``; ``a->b`` across a switch). At close,
+``indices.json`` in the bag directory lists every cycle and, per controller segment, the
+cycles it fully commanded and the last of them: the figure the paper reports.
 """
 from __future__ import annotations
 
@@ -51,129 +49,34 @@ import time
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from hexapod_sim.core import msg_checks as M
+from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import in_charge
+from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_sim.core.params import CONTROLLERS
+from hexapod_sim.core.topics import TICK_TOPICS, TOPICS
+from hexapod_sim.hot_loop import FastLogger, HotLoop
+from hexapod_sim.input_guard import InputGuard
+from hexapod_sim.node_main import run_node
+from hexapod_sim.param_topic import ParamAnnouncer
+from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from hexapod_sim import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.errors import CdrError, HexapodError, ParameterError
-from hexapod_sim.core.msg_auth import AuthError
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
-from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
-
 from hexapod_sim.core import cdr
-from .bag import BagWriter
-from .bag import BagError, BagStorageError
-from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, compute_indices, lag_growth
-from .core.log_times import ControllerLogTimes, marker_array_stamp
-from .core.recording import TICK_TOPICS, TOPICS, ParamRecorder, indices_status
+from hexapod_sim.core.errors import CdrError
 
-#: The state topics a cycle's indices need, all stamped per tick.
-CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
+from .bag import BagError, BagStorageError, BagWriter
+from .core.cycles import CYCLE_TOPICS, Cycle, CycleScorer, segments
+from .core.indices import INDEX_NAMES, REPORTED_NAMES
+from .core.log_times import ControllerLogTimes, marker_array_stamp
+from .core.recording import ParamRecorder, indices_status
+
 #: Exit code of a recorder whose bag could not be written to the end (disk full, ...).
 EXIT_RECORDING_FAILED = 3
-
-
-def frame_of(data: bytes) -> str:
-    """header.frame_id of a serialized stamped message."""
-    n = int.from_bytes(data[12:16], "little")
-    return bytes(data[16:16 + n - 1]).decode() if n else ""
-
-
-class CycleScorer:
-    """Collects the per-tick messages of the state topics and scores each full gait cycle."""
-
-    def __init__(self, ticks_per_cycle: int, period: float) -> None:
-        self.n = ticks_per_cycle
-        self.period = period
-        self.period_ns = int(round(period * 1e9))
-        self.raw: dict[str, dict[int, bytes]] = {t: {} for t in CYCLE_TOPICS}
-        self.controller: dict[int, str] = {}  # tick -> controller in charge (states' frame)
-        self.next_cycle = 0
-        self.latest = -1  # newest tick seen
-        self.cycles: list[dict[str, Any]] = []
-        self.segments: list[dict[str, Any]] = []  # {controller, from_tick, to_tick}
-
-    def add(self, topic: str, stamp_ns: int, data: bytes) -> list[dict[str, Any]]:
-        """Store one message; return the cycles that became complete (scored)."""
-        k = C.tick_of(stamp_ns, self.period_ns)
-        if self.latest < 0:  # joined mid-run: start with the first cycle seen from its start
-            self.next_cycle = -(-k // self.n)
-        if k < self.next_cycle * self.n:
-            return []
-        self.raw[topic][k] = data
-        self.latest = max(self.latest, k)
-        if topic == T.JOINT_STATES:
-            ctrl = frame_of(data)
-            self.controller[k] = ctrl
-            seg = self.segments[-1] if self.segments else None
-            if seg is None or seg["controller"] != ctrl:
-                self.segments.append({"controller": ctrl, "from_tick": k, "to_tick": k})
-            else:
-                seg["to_tick"] = max(seg["to_tick"], k)
-        done = []
-        while True:
-            end = (self.next_cycle + 1) * self.n
-            if all(end in self.raw[t] for t in CYCLE_TOPICS):
-                cycle = self._score(self.next_cycle)
-                if cycle is not None:
-                    done.append(cycle)
-            elif self.latest <= end + self.n:
-                break
-            # else: a whole cycle later the end of this one is still missing: skip it
-            self.next_cycle += 1
-            start = self.next_cycle * self.n
-            for buf in (*self.raw.values(), self.controller):
-                for old in [j for j in buf if j < start]:
-                    del buf[old]
-        return done
-
-    def _score(self, c: int) -> dict[str, Any] | None:
-        k_a, k_b = c * self.n, (c + 1) * self.n
-        ticks = range(k_a, k_b + 1)
-        arrays = {}
-        for t in CYCLE_TOPICS:
-            buf = self.raw[t]
-            if any(k not in buf for k in ticks):
-                return None  # a gap (not in lockstep): no indices for this cycle
-            arrays[t] = cdr.decode_joint_state_batch([buf[k] for k in ticks])
-        js, ff, hs, ref = (arrays[t] for t in CYCLE_TOPICS)
-        shape = (len(ticks), 6, 2)
-        r = T.split_reference(ref.position, ref.velocity)
-        idx = compute_indices(js.effort.reshape(shape), js.velocity.reshape(shape),
-                              hs.effort.reshape(shape), hs.position.reshape(shape), r["hip"],
-                              ff.position.reshape(shape), r["foot"], self.period)
-        # Sample k carries the torque of the command of tick k - 1.
-        ctrls = [self.controller.get(k, "") for k in range(k_a, k_b)]
-        names = [ctrls[0]] + [b for a, b in zip(ctrls, ctrls[1:]) if a != b]
-        return {"cycle": c, "t_a": k_a * self.period, "t_b": k_b * self.period,
-                "controller": "->".join(names), "indices": idx.as_dict()}
-
-    def report(self) -> dict[str, Any]:
-        """Every cycle and, per controller segment, its full cycles and the last one."""
-        segs = []
-        for i, s in enumerate(self.segments):
-            full = [c for c in self.cycles if c["controller"] == s["controller"]
-                    and s["from_tick"] <= c["t_a"] / self.period + 0.5
-                    and c["t_b"] / self.period - 0.5 <= s["to_tick"] + 1]
-            # A segment lasts until the next one starts (its last command acts until then).
-            end = (self.segments[i + 1]["from_tick"] if i + 1 < len(self.segments)
-                   else s["to_tick"])
-            segs.append({**s, "t_start": s["from_tick"] * self.period, "t_end": end * self.period,
-                         "cycles": [c["cycle"] for c in full],
-                         "last_full_cycle": full[-1] if full else None})
-        return {"control_period": self.period, "ticks_per_cycle": self.n,
-                "index_names": list(REPORTED_NAMES), "segments": segs,
-                "cycles": self.cycles}
 
 
 class MetricsNode(Node):
@@ -201,7 +104,11 @@ class MetricsNode(Node):
         max_duration = declare_node_param(self, "max_bag_duration", 0.0,
                                           "sim s per MCAP file before a new one starts (0: one)")
         self.period = p.sim.control_period
-        self.scorer = CycleScorer(int(round(p.cycle_time / self.period)), self.period)
+        # The recorder takes its queues topic by topic and may lag by seconds: a cycle waits
+        # for its slowest topic (as offline), and is given up only if a topic stays 10 cycles
+        # behind the others (dead; memory stays bounded).
+        n = int(round(p.cycle_time / self.period))
+        self.scorer = CycleScorer(n, self.period, gap_ticks=10 * n)
         self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"},
                                 flush_interval_s=0.5, sync_topics=TICK_TOPICS,
                                 follow_topics=(T.MARKERS,),
@@ -214,8 +121,8 @@ class MetricsNode(Node):
         self.failure: BagStorageError | None = None
         self.dropped = 0  # messages received after the recording failed
         self.controller_times = ControllerLogTimes()
-        for topic, (msgtype, _) in TOPICS.items():
-            self.writer.add_topic(topic, msgtype, C.TOPIC_QOS[topic].preset)
+        for topic, spec in TOPICS.items():
+            self.writer.add_topic(topic, spec.msg_type, spec.preset)
         self.clock_ns = 0
         self.counts = {t: 0 for t in TOPICS}
         self.guard.publish_status(self.get_name(), lambda: self.clock_ns)
@@ -273,10 +180,16 @@ class MetricsNode(Node):
                     self._write(T.CLOCK, stamp, C.encode_clock(stamp))
                 self._write(topic, stamp, payload)
                 if topic == T.JOINT_STATES:
-                    self._write_controller(self.controller_times.on_state(stamp, view.frame_id))
+                    self._write_controller(self.controller_times.on_state(
+                        stamp, in_charge(view.frame_id)))
                 if topic in CYCLE_TOPICS:
-                    for cycle in self.scorer.add(topic, stamp, payload):
-                        self._publish_cycle(cycle)
+                    tick = C.tick_of(stamp, period_ns)
+                    if topic == T.JOINT_STATES:
+                        self.scorer.add_frame(tick, view.frame_id)
+                    self.scorer.add_raw(topic, tick, payload)
+                    for cycle in self.scorer.take():
+                        if cycle.sums is not None:  # a gap (not in lockstep): no indices
+                            self._publish_cycle(cycle)
         elif topic == T.MARKERS:  # the first marker's stamp (the latest clock if empty)
             def cb(data: bytes, topic: str = topic) -> None:
                 payload = g.payload(topic, data)
@@ -339,25 +252,28 @@ class MetricsNode(Node):
                     ", ".join(f"{k} = {v!r}" for k, v in rec.values.items())
                 self.log.info(f"parameters of {rec.node} at tick {rec.tick}: {what}")
 
-    def _publish_cycle(self, cycle: dict[str, Any]) -> None:
-        prev = self.scorer.cycles[-1] if self.scorer.cycles else None
-        idx = Indices(**cycle["indices"])
-        growth = lag_growth(Indices(**prev["indices"]), idx) \
-            if prev is not None and prev["cycle"] == cycle["cycle"] - 1 else float("nan")
-        cycle["lag_growth"] = growth
-        self.scorer.cycles.append(cycle)
-        status = indices_status(idx, cycle["controller"], cycle["cycle"], cycle["t_a"],
-                                cycle["t_b"], growth)
-        stamp = T.stamp_ns(cycle["t_b"])
-        data = cdr.encode_diagnostic_array(stamp, [status])
+    def _publish_cycle(self, cycle: Cycle) -> None:
+        idx = cycle.indices
+        assert idx is not None
+        stamp = T.stamp_ns(cycle.t_b)
+        data = cdr.encode_diagnostic_array(stamp, [indices_status(cycle)])
         self.pub_indices.publish(self.indices_signer.sign(data))
         self._write(T.INDICES, stamp, data)
         self.log.info(
-            f"cycle {cycle['cycle']} [{cycle['t_a']:g}, {cycle['t_b']:g}] s "
-            f"({cycle['controller']}): "
-            + ", ".join(f"{n} {cycle['indices'][n]:.4g}" for n in INDEX_NAMES)
-            + f"; hip lag {cycle['indices']['lag_xH']:.4g} m ({growth:+.3g} m since the last "
+            f"cycle {cycle.cycle} [{cycle.t_a:g}, {cycle.t_b:g}] s ({cycle.controller}): "
+            + ", ".join(f"{n} {getattr(idx, n):.4g}" for n in INDEX_NAMES)
+            + f"; hip lag {idx.lag_xH:.4g} m ({cycle.lag_growth:+.3g} m since the last "
             "cycle)")
+
+    def scores(self) -> dict[str, Any]:
+        """Every scored cycle and, per controller segment, the cycles it fully commanded and
+        the last of them (indices.json)."""
+        sc = self.scorer
+        done = [c for c in sc.cycles if c.sums is not None]
+        return {"control_period": self.period, "ticks_per_cycle": sc.n,
+                "index_names": list(REPORTED_NAMES),
+                "segments": segments(done, sc.labels.history, self.period, sc.last_state),
+                "cycles": [c.as_dict() for c in done]}
 
     def close(self) -> None:
         """Take what is queued, close the bag, write indices.json; idempotent."""
@@ -378,7 +294,7 @@ class MetricsNode(Node):
                   "parameter_records": len(self.params_log.records),
                   "dropped": {f"{t} ({c})": n for (t, c), n in self.guard.drops.counts.items()},
                   "outside_publishers": {t: sorted(n) for t, n in self.guard.outsiders.items()},
-                  **self.scorer.report(),
+                  **self.scores(),
                   "recording": self.recording_report()}
         try:
             (self.bag_path / "indices.json").write_text(json.dumps(report, indent=1))
@@ -390,7 +306,7 @@ class MetricsNode(Node):
         late = self.writer.late_messages
         self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
-            f"{len(self.scorer.cycles)} cycles scored"
+            f"{sum(c.sums is not None for c in self.scorer.cycles)} cycles scored"
             + (f", {late} came in after their chunk" if late else "") + ")"
             + f"; inputs: {self.guard.summary()}")
 
@@ -420,34 +336,15 @@ class MetricsNode(Node):
         self.log.error(f"recording stopped at sim time {self.clock_ns * 1e-9:.3f} s: {err}")
 
 
+def _finish(node: MetricsNode, code: int) -> int:
+    """Close the bag and write indices.json; a recording that failed exits 3."""
+    node.close()
+    return EXIT_RECORDING_FAILED if node.failure is not None else code
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``metrics``."""
-    if not init_rclpy(args, "metrics"):
-        return 2
-    node = None
-    code = 0
-    try:
-        node = MetricsNode()
-        install_stop_signals(node.loop)
-        node.loop.spin()
-        if node.failure is not None:
-            code = EXIT_RECORDING_FAILED
-    except (HexapodError, BagError) as err:
-        rclpy.logging.get_logger("metrics").error(str(err))
-        code = 2 if isinstance(err, (ParameterError, AuthError)) else 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            try:
-                node.close()
-                if node.failure is not None:
-                    code = EXIT_RECORDING_FAILED
-            finally:
-                node.loop.destroy()
-                node.destroy_node()
-        rclpy.try_shutdown()
-    return code
+    return run_node("metrics", MetricsNode, args, finish=_finish, errors=(BagError,))
 
 
 if __name__ == "__main__":

@@ -9,9 +9,9 @@ Two ways across the boundary:
   nodes publish and take raw bytes, the very bytes rclpy produces (XCDR1 little endian,
   padding zeroed); tests compare them.
 
-The QoS of each contract topic is defined here too (:data:`TOPIC_QOS`), so that publishers,
-subscribers and the recorder agree. Stamps are integer nanoseconds of simulated time
-(``hexapod_sim.core.topics.stamp_ns``).
+:data:`TOPIC_QOS` gives rclpy profiles and message classes for the one topic table
+(``core/topics.py`` ``TOPICS``, which the recorder and ``simulate --bag`` read too).
+Stamps are integer nanoseconds of simulated time (``hexapod_sim.core.topics.stamp_ns``).
 """
 from __future__ import annotations
 
@@ -42,18 +42,13 @@ from .core.cdr import (
 
 # --------------------------------------------------------------------------- QoS
 
-#: Depth of the publishers' histories of the per-tick topics: how far (in ticks) a slow
-#: reliable reader (the recorder) may lag before the writer drops samples for it.
-HISTORY_DEPTH = 5000
-#: Depth of the recorder's subscriptions (reader-side queue between two takes).
-RECORD_DEPTH = 10000
-#: Depth of the control loop's subscriptions (sim, controllers, trajectory generator,
-#: markers): a process starved of CPU for up to this many ticks (0.2 s at 1 kHz), or a
-#: topic flooded by a process outside the graph (whose messages are dropped, but fill the
-#: queue first), still finds every message it needs. With 10, a controller taking over in
-#: realtime mode on a loaded machine sometimes found the switch tick's state or inputs
-#: rolled out of its queues and never answered it.
-CONTROL_DEPTH = 200
+#: Queue depths (topics.py): publishers' histories, the recorder's and the control loop's.
+HISTORY_DEPTH, RECORD_DEPTH, CONTROL_DEPTH = T.HISTORY_DEPTH, T.RECORD_DEPTH, T.CONTROL_DEPTH
+#: Message classes of the topic table's types.
+MSG_CLASSES: dict[str, type] = {
+    "rosgraph_msgs/msg/Clock": Clock, T.JOINT_STATE: JointState, "std_msgs/msg/String": String,
+    T.DIAGNOSTIC_ARRAY: DiagnosticArray, "visualization_msgs/msg/MarkerArray": MarkerArray,
+}
 
 
 def _qos(depth: int, transient: bool = False) -> QoSProfile:
@@ -65,43 +60,41 @@ def _qos(depth: int, transient: bool = False) -> QoSProfile:
 
 @dataclass(frozen=True)
 class TopicQos:
-    """Offered (publisher) QoS of one contract topic; ``transient`` = transient-local.
+    """rclpy's view of one row of the topic table (``topics.TOPICS``)."""
 
-    Reference and commands are transient-local so that a reader matched a little late (at
-    start, or a controller or recorder started mid-run) still gets the recent samples.
-    """
+    spec: T.TopicSpec
 
-    msg_type: type
-    transient: bool = False
-    depth: int = HISTORY_DEPTH
+    @property
+    def msg_type(self) -> type:
+        """The message class."""
+        return MSG_CLASSES[self.spec.msg_type]
 
-    def publisher(self) -> QoSProfile:
-        """The publisher's profile."""
-        return _qos(self.depth, self.transient)
+    @property
+    def transient(self) -> bool:
+        """Transient-local durability."""
+        return self.spec.transient
 
-    def subscriber(self, depth: int) -> QoSProfile:
-        """A subscriber profile of ``depth`` that gets late-joiner history if offered."""
-        return _qos(depth, self.transient)
+    @property
+    def depth(self) -> int:
+        """The publisher's history depth."""
+        return self.spec.depth
 
     @property
     def preset(self) -> str:
-        """The bag writer's QoS preset for this topic ('reliable' or 'transient_local')."""
-        return "transient_local" if self.transient else "reliable"
+        """The bag's QoS preset ('reliable' or 'transient_local')."""
+        return self.spec.preset
+
+    def publisher(self) -> QoSProfile:
+        """The publisher's profile."""
+        return _qos(self.spec.depth, self.spec.transient)
+
+    def subscriber(self, depth: int) -> QoSProfile:
+        """A subscriber profile of ``depth`` that gets late-joiner history if offered."""
+        return _qos(depth, self.spec.transient)
 
 
-TOPIC_QOS: dict[str, TopicQos] = {
-    T.CLOCK: TopicQos(Clock),
-    T.JOINT_STATES: TopicQos(JointState),
-    T.FOOT_FORCES: TopicQos(JointState),
-    T.HIP_STATES: TopicQos(JointState),
-    T.REFERENCE: TopicQos(JointState, transient=True),
-    T.JOINT_COMMANDS: TopicQos(JointState, transient=True),
-    T.ACTIVE_CONTROLLER: TopicQos(String, transient=True, depth=1),
-    T.INDICES: TopicQos(DiagnosticArray, depth=100),
-    T.STATUS: TopicQos(DiagnosticArray, depth=10),
-    T.MARKERS: TopicQos(MarkerArray, depth=100),
-    T.PARAMETERS: TopicQos(DiagnosticArray, transient=True, depth=1000),
-}
+#: The topic table with rclpy's QoS profiles and message classes.
+TOPIC_QOS: dict[str, TopicQos] = {t: TopicQos(spec) for t, spec in T.TOPICS.items()}
 
 # --------------------------------------------------------------------------- stamps
 
@@ -201,7 +194,7 @@ def fill_obs(obs: np.ndarray, topic: str, position: np.ndarray, velocity: np.nda
 
 __all__ = [
     "CODECS", "CONTROL_DEPTH", "ENCAPSULATION", "HISTORY_DEPTH", "JointStateCodec",
-    "JointStateView", "LEVELS", "NS", "RECORD_DEPTH", "Status", "TOPIC_QOS",
+    "MSG_CLASSES", "JointStateView", "LEVELS", "NS", "RECORD_DEPTH", "Status", "TOPIC_QOS",
     "TopicQos", "clock", "decode_stamp", "decode_string", "diagnostic_array",
     "encode_clock", "encode_string", "fill_obs", "from_time", "joint_state",
     "statuses", "string", "tick_of", "to_time",

@@ -6,10 +6,13 @@ one cycle (plus decimated plot series), not by the bag. The sample convention is
 engine's (indices.py), so the analysis of a graph bag equals the engine's and the metrics
 node's numbers.
 
-Which controller was in charge at each tick comes from the ``header.frame_id`` of
-``/hexapod/joint_states`` (the sim writes the controller's name there); segments are split at
-its changes, i.e. at the recorded switches, and at every recorded parameter change
-(bag_params.py), each segment naming the values that differ from the start.
+Cycles are scored by the one scorer (core/cycles.py), as online. Which controller was in
+charge at each tick, and whether it commanded each torque, comes from the ``header.frame_id``
+of ``/hexapod/joint_states`` (``hexapod_sim.core.labels``); a cycle with held or fallback
+torques is labelled so, never with the controller's name. Segments are split at changes of
+the controller in charge, i.e. at the recorded switches, and at every recorded parameter
+change (bag_params.py), each segment naming the values that differ from the start; a
+segment's indices cover the cycles its controller fully commanded.
 """
 from __future__ import annotations
 
@@ -18,39 +21,28 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.cdr import decode_diagnostic_array
 from hexapod_sim.core.errors import CdrError
+from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.layout import O_HP, O_TQ
 from hexapod_sim.core.param_log import ParamTimeline
 from hexapod_sim.core.params import HexapodParams
 
 from ..bag import Bag, BagReadError, iter_joint_state_blocks, open_bag
 from .bag_params import bag_params
-from .indices import Indices, WindowSums, sums_from_obs
+from .cycles import CYCLE_TOPICS, Cycle, CycleScorer
+from .indices import Indices, WindowSums
 from .recording import status_indices
 
-STREAMS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
+STREAMS = CYCLE_TOPICS
 #: At most this many points per plot series (older points are thinned by 2 when exceeded).
 MAX_PLOT_POINTS = 20000
-MIXED = "mixed"
 
 
-@dataclass(frozen=True)
-class CycleResult:
-    """Gait cycle ``cycle`` (ticks cycle*M .. (cycle+1)*M): who ran it and its indices."""
-
-    cycle: int
-    t_a: float
-    t_b: float
-    controller: str            # MIXED if a switch happened inside the cycle
-    sums: WindowSums | None    # None if ticks are missing
-    missing: int = 0
-
-    @property
-    def indices(self) -> Indices | None:
-        """The cycle's indices, None if incomplete."""
-        return self.sums.indices() if self.sums else None
+#: A gait cycle of the analysis: the one scorer's (core/cycles.py).
+CycleResult = Cycle
 
 
 @dataclass(frozen=True)
@@ -115,7 +107,8 @@ class BagAnalysis:
 def controller_changes(bag: Bag, dt_ns: int,
                        online: list[tuple[int, str, Indices]] | None = None
                        ) -> list[tuple[int, str]]:
-    """(first tick, controller) at the start and at every change of joint_states' frame_id.
+    """(first tick, controller in charge) at the start and at every change of it (the
+    controller named by joint_states' frame_id, ``hexapod_sim.core.labels``).
 
     If ``online`` is given, the bag's /hexapod/indices records are appended to it as
     (cycle, controller, indices).
@@ -128,9 +121,16 @@ def controller_changes(bag: Bag, dt_ns: int,
     return ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
 
 
-def ticks_of_changes(frames: list[tuple[int, str]], dt_ns: int) -> list[tuple[int, str]]:
-    """(stamp ns, frame_id) changes -> (tick, controller); an empty frame_id is 'unknown'."""
-    return [(int(round(stamp / dt_ns)), frame or "unknown") for stamp, frame in frames]
+def ticks_of_changes(frames: list[tuple[int, str]], dt_ns: int,
+                     into: list[tuple[int, str]] | None = None) -> list[tuple[int, str]]:
+    """(stamp ns, frame_id) changes -> (tick, controller in charge) at each change of the
+    controller (appended to ``into`` if given); an empty frame_id is 'unknown'."""
+    out = [] if into is None else into
+    for stamp, frame in frames:
+        who = in_charge(frame)
+        if not out or out[-1][1] != who:
+            out.append((int(round(stamp / dt_ns)), who))
+    return out
 
 
 def online_indices(bag: Bag) -> list[tuple[int, str, Indices]]:
@@ -140,68 +140,12 @@ def online_indices(bag: Bag) -> list[tuple[int, str, Indices]]:
     return [r for _, _, raw in bag.messages([T.INDICES]) for r in _online_records(raw)]
 
 
-def label_ticks(changes: list[tuple[int, str]], ticks: np.ndarray) -> np.ndarray:
+def label_ticks(changes: list[tuple[int, str]], ticks: npt.ArrayLike) -> np.ndarray:
+    """The controller of each tick from (first tick, controller) changes."""
     starts = np.array([k for k, _ in changes], dtype=np.int64)
     names = np.array([c for _, c in changes] or ["unknown"], dtype=object)
     pos = np.searchsorted(starts, ticks, side="right") - 1
     return names[np.clip(pos, 0, None)]
-
-
-class _Buffer:
-    """Rows of one topic not yet consumed, keyed by tick: one growable (n, 3, width) array
-    whose live rows are ``[a, b)``, so a push copies only the new rows."""
-
-    def __init__(self) -> None:
-        self._k = np.zeros(0, np.int64)
-        self._data = np.zeros((0, 3, 0))
-        self._a = self._b = 0
-
-    @property
-    def k(self) -> np.ndarray:
-        """Ticks of the live rows, ascending."""
-        return self._k[self._a:self._b]
-
-    def _room(self, n: int, width: int) -> None:
-        live = self._b - self._a
-        if self._b + n <= len(self._k) and self._data.shape[2] == width:
-            return
-        cap = max(2 * (live + n), 4096) if live + n > len(self._k) // 2 else len(self._k)
-        k = np.empty(cap, np.int64)
-        data = np.empty((cap, 3, width))
-        if live:  # (a topic's width never changes: the decoder refuses other names)
-            k[:live] = self._k[self._a:self._b]
-            data[:live] = self._data[self._a:self._b]
-        self._k, self._data, self._a, self._b = k, data, 0, live
-
-    def push(self, k: np.ndarray, pos: np.ndarray, vel: np.ndarray, eff: np.ndarray) -> None:
-        n = len(k)
-        if n == 0:
-            return
-        self._room(n, pos.shape[1])
-        a, b = self._a, self._b
-        # the new ticks must follow the old ones (checked at the seam)
-        ordered = (b == a or int(k[0]) > int(self._k[b - 1])) and bool(np.all(np.diff(k) > 0))
-        self._k[b:b + n] = k
-        rows = self._data[b:b + n]
-        rows[:, 0], rows[:, 1], rows[:, 2] = pos, vel, eff
-        self._b = b + n
-        if not ordered:  # out of order or duplicated: sort, keep the first
-            ks, first = np.unique(self._k[a:self._b], return_index=True)
-            self._data[a:a + len(ks)] = self._data[a:self._b][first]
-            self._k[a:a + len(ks)] = ks
-            self._b = a + len(ks)
-
-    def window(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Ticks present in [k0, k1] and their rows (views, valid until the next push)."""
-        i, j = np.searchsorted(self.k, [k0, k1 + 1])
-        return self.k[i:j], self._data[self._a + i:self._a + j]
-
-    def drop_before(self, k: int) -> None:
-        self._a += int(np.searchsorted(self.k, k))
-
-    @property
-    def last(self) -> int:
-        return int(self._k[self._b - 1]) if self._b > self._a else -1
 
 
 def _online_records(raw: bytes) -> list[tuple[int, str, Indices]]:
@@ -236,67 +180,37 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
         switch_ticks: list[tuple[int, str]] = []
         changes: list[tuple[int, str]] = []
-        buffers = {t: _Buffer() for t in STREAMS}
         series = PlotSeries(stride=max(1, bag.topics[T.JOINT_STATES].message_count
                                        // MAX_PLOT_POINTS))
-        cycles: list[CycleResult] = []
-        first_tick: int | None = None
-        next_cycle: int | None = None
-        ticks = 0
-        last_tick = 0
 
-        def consume(final: bool) -> None:
-            nonlocal next_cycle
-            while next_cycle is not None:
-                k0, k1 = next_cycle * m, (next_cycle + 1) * m
-                if not final and min(b.last for b in buffers.values()) < k1:
-                    return
-                if final and max(b.last for b in buffers.values()) < k1:
-                    return
-                cycles.append(_cycle(next_cycle, k0, k1))
-                for b in buffers.values():
-                    b.drop_before(k1)
-                next_cycle += 1
-
-        def _cycle(c: int, k0: int, k1: int) -> CycleResult:
-            parts = {t: buffers[t].window(k0, k1) for t in STREAMS}
-            want = k1 - k0 + 1
-            lost = max(want - len(ks) for ks, _ in parts.values())
-            labels = label_ticks(changes, np.arange(k0, k1))  # who computed the torques
-            who = labels[0] if np.all(labels == labels[0]) else MIXED
-            if lost:
-                return CycleResult(c, k0 * dt, k1 * dt, who, None, lost)
-            cols = {t: (rows[:, 0], rows[:, 1], rows[:, 2]) for t, (_, rows) in parts.items()
-                    if t != T.REFERENCE}
-            obs = T.obs_from_columns(cols)
-            ref_rows = parts[T.REFERENCE][1]
-            ref = T.split_reference(ref_rows[:, 0], ref_rows[:, 1])
-            sel = slice(0, want - 1, series.stride)  # ticks k0 .. k1-1
+        def plot(k0: int, k1: int, obs: np.ndarray, ref: dict[str, np.ndarray]) -> None:
+            sel = slice(0, k1 - k0, series.stride)  # ticks k0 .. k1-1
             sig = np.stack([np.abs(ref["hip"][sel, 0, 0] - obs[sel, O_HP, 0, 0]),
                             np.abs(ref["hip"][sel, 0, 1] - obs[sel, O_HP, 0, 1]),
                             obs[sel, O_TQ, 0, 0], obs[sel, O_TQ, 0, 1]], axis=1)
             ks = np.arange(k0, k1)[sel]
             series.add(ks * dt, sig, label_ticks(changes, ks))
-            return CycleResult(c, k0 * dt, k1 * dt, who,
-                               sums_from_obs(obs, ref["hip"], ref["foot"], dt))
 
+        scorer = CycleScorer(m, dt, on_samples=plot)
+        cycles: list[CycleResult] = []
+        ticks = 0
+        last_tick = 0
         for topic, arrays in iter_joint_state_blocks(bag, STREAMS, frames=frames,
                                                      others=indices_raw):
             if frames[T.JOINT_STATES]:  # labels of ticks up to the newest state are final
-                switch_ticks += ticks_of_changes(frames[T.JOINT_STATES], dt_ns)
+                for stamp, frame in frames[T.JOINT_STATES]:
+                    scorer.add_frame(int(round(stamp / dt_ns)), frame)
+                ticks_of_changes(frames[T.JOINT_STATES], dt_ns, into=switch_ticks)
                 frames[T.JOINT_STATES].clear()
                 changes = (with_param_boundaries(switch_ticks, tl) if tl is not None
                            else list(switch_ticks))
             k = np.rint(arrays.stamps / dt_ns).astype(np.int64)
-            buffers[topic].push(k, arrays.position, arrays.velocity, arrays.effort)
+            scorer.add_block(topic, k, arrays.position, arrays.velocity, arrays.effort)
             if topic == T.JOINT_STATES:
                 ticks += len(k)
                 last_tick = max(last_tick, int(k.max(initial=-1)))
-            if first_tick is None and min(b.last for b in buffers.values()) >= 0:
-                first_tick = int(min(b.k[0] for b in buffers.values()))
-                next_cycle = -(-first_tick // m)  # first cycle boundary at or after it
-            consume(final=False)
-        consume(final=True)
+            cycles += scorer.take()
+        cycles += scorer.take(final=True)
         online = [r for _, raw in indices_raw[T.INDICES] for r in _online_records(raw)]
         truncated, reason = bag.truncated, bag.truncation_reason
     if ticks == 0:
@@ -345,7 +259,6 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
 
 
 __all__ = [
-    "MIXED",
     "BagAnalysis",
     "CycleResult",
     "SegmentResult",

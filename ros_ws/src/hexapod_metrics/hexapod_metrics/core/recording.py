@@ -1,7 +1,8 @@
 """What a bag of this project holds, and writing an in-process run in exactly that format.
 
-:data:`TOPICS` is the one table of recorded topics (type and offered QoS) shared by the
-metrics node and ``hexapod simulate --bag``; the analysis reads either kind of bag.
+Both the metrics node and ``hexapod simulate --bag`` record the topics of the one topic table
+(``hexapod_sim.core.topics.TOPICS``) with its QoS, and score cycles with the one scorer
+(``core/cycles.py``); the analysis reads either kind of bag.
 """
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ import json
 from pathlib import Path
 
 import numpy as np
-
 from hexapod_control.core.closed_loop import RunResult
 from hexapod_sim.core import topics as T
+from hexapod_sim.core.labels import state_frame
 from hexapod_sim.core.layout import O_HP
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.core.params import SPECS, HexapodParams, from_flat
@@ -20,9 +21,9 @@ from hexapod_sim.core import cdr
 from hexapod_sim.core.cdr import DiagnosticStatus
 
 from ..bag import BagWriter
-from .indices import REPORTED_NAMES, Indices, indices_from_obs
+from .cycles import Cycle, CycleScorer, indices_values
+from .indices import REPORTED_NAMES, Indices
 
-JOINT_STATE = "sensor_msgs/msg/JointState"
 PARAMS_KEY = "hexapod_params"
 #: metadata.yaml custom_data key mirroring the MCAP's parameter records (JSON list of maps).
 RECORDS_KEY = "hexapod_parameter_records"
@@ -30,24 +31,9 @@ RECORDS_KEY = "hexapod_parameter_records"
 SIM_NODE = "hexapod_sim"
 #: The writer of in-process bags, as named in their parameter records.
 SIMULATE_NODE = "hexapod simulate"
-#: topic -> (message type, offered QoS preset of bag.QOS_PRESETS)
-TOPICS: dict[str, tuple[str, str]] = {
-    T.CLOCK: ("rosgraph_msgs/msg/Clock", "reliable"),
-    T.JOINT_STATES: (JOINT_STATE, "reliable"),
-    T.FOOT_FORCES: (JOINT_STATE, "reliable"),
-    T.HIP_STATES: (JOINT_STATE, "reliable"),
-    T.REFERENCE: (JOINT_STATE, "reliable"),
-    T.JOINT_COMMANDS: (JOINT_STATE, "reliable"),
-    T.ACTIVE_CONTROLLER: ("std_msgs/msg/String", "transient_local"),
-    T.INDICES: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
-    T.STATUS: ("diagnostic_msgs/msg/DiagnosticArray", "reliable"),
-    T.MARKERS: ("visualization_msgs/msg/MarkerArray", "reliable"),
-    T.PARAMETERS: ("diagnostic_msgs/msg/DiagnosticArray", "transient_local"),
-}
-#: The topics published at every control tick: the recorder cuts its chunks at the same
-#: tick of all of them (so a killed recorder truncates them all at one tick).
-TICK_TOPICS = (T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
-               T.JOINT_COMMANDS)
+#: The recorded topics: the one topic table (type, QoS, depth) of ``hexapod_sim.core.topics``.
+TOPICS = T.TOPICS
+TICK_TOPICS = T.TICK_TOPICS
 
 
 def params_from_custom_data(custom: dict[str, str] | None) -> HexapodParams | None:
@@ -98,15 +84,12 @@ class ParamRecorder:
         return True
 
 
-def indices_status(idx: Indices, controller: str, cycle: int, t_a: float,
-                   t_b: float, lag_growth: float = float("nan")) -> DiagnosticStatus:
-    """One /hexapod/indices status: the seven indices of gait cycle ``cycle``, L, the hip lag
-    and its growth since the previous cycle (m per cycle)."""
-    values = tuple((n, repr(float(getattr(idx, n)))) for n in REPORTED_NAMES)
-    values += (("lag_growth", repr(float(lag_growth))), ("controller", controller),
-               ("cycle", str(cycle)), ("t_a", repr(t_a)), ("t_b", repr(t_b)))
-    return DiagnosticStatus(name=f"hexapod/indices/{controller}", message=f"cycle {cycle}",
-                            hardware_id="hexapod", level=0, values=values)
+def indices_status(cycle: Cycle) -> DiagnosticStatus:
+    """One /hexapod/indices status: the seven indices of a scored gait cycle, L, the hip lag
+    and its growth since the previous cycle (m per cycle), its label and who was in charge."""
+    return DiagnosticStatus(name=f"hexapod/indices/{cycle.controller}",
+                            message=f"cycle {cycle.cycle}", hardware_id="hexapod", level=0,
+                            values=indices_values(cycle))
 
 
 def status_indices(status: DiagnosticStatus) -> tuple[Indices, dict[str, str]]:
@@ -120,17 +103,19 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     """Write an in-process run as the graph would record it (every tick of every topic).
 
     Log time = stamp = simulated time. The command of tick k answers the state of tick k;
-    the per-cycle indices are published at the end of each full gait cycle.
+    each full gait cycle is scored by the one scorer (core/cycles.py) from the bytes
+    recorded and its indices are written at its last tick, as the metrics node does.
     """
     path = Path(path)
     p = run.params
     ref = run.reference
     n_ticks = run.command.shape[0]
     ticks_per_cycle = int(round(p.cycle_time / p.sim.control_period))
+    scorer = CycleScorer(ticks_per_cycle, p.sim.control_period)
     with BagWriter(path, custom_data={"source": SIMULATE_NODE}) as bag:
-        for name, (msgtype, qos) in TOPICS.items():
+        for name, spec in TOPICS.items():
             if name not in (T.STATUS, T.MARKERS):  # published by nodes only
-                bag.add_topic(name, msgtype, qos)
+                bag.add_topic(name, spec.msg_type, spec.preset)
         records = ParamRecorder(bag, params_node=SIMULATE_NODE)
         records.add(ParamRecord(SIMULATE_NODE, "start", 0, 0, p.to_flat()))
         changes: dict[int, dict[str, object]] = {}
@@ -148,30 +133,40 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
             if k in switch_ticks:
                 bag.write_string(T.ACTIVE_CONTROLLER, stamp, who)
             bag.write_clock(T.CLOCK, stamp)
+            frame = state_frame(who)  # every torque of an in-process run is commanded
             for topic in T.STATE_TOPICS:
                 c = T.state_columns(obs, topic)
-                bag.write_joint_state(topic, stamp, c.names, c.position, c.velocity, c.effort,
-                                      frame_id=who if topic == T.JOINT_STATES else "")
+                data = cdr.encode_joint_state(stamp, c.names, c.position, c.velocity,
+                                              c.effort, frame if topic == T.JOINT_STATES else "")
+                bag.write(topic, stamp, data)
+                scorer.add_raw(topic, k, data)
+            scorer.add_frame(k, frame)
             c = T.reference_columns(ref.theta[k], ref.theta_vel[k], ref.hip[k], ref.hip_vel[k],
                                     ref.foot[k], ref.foot_vel[k])
-            bag.write_joint_state(T.REFERENCE, stamp, c.names, c.position, c.velocity, c.effort)
+            data = cdr.encode_joint_state(stamp, c.names, c.position, c.velocity, c.effort)
+            bag.write(T.REFERENCE, stamp, data)
+            scorer.add_raw(T.REFERENCE, k, data)
             if k < last:
                 c = T.command_columns(run.command[k])
                 bag.write_joint_state(T.JOINT_COMMANDS, stamp, c.names, c.position, c.velocity,
                                       c.effort, frame_id=who)
-            if k > 0 and k % ticks_per_cycle == 0 and np.isfinite(run.obs[k, O_HP]).all():
-                sl = slice(k - ticks_per_cycle, k + 1)
-                idx = indices_from_obs(run.obs[sl], ref.hip[sl], ref.foot[sl],
-                                       p.sim.control_period)
-                who = run.controller_at(k - 1)
-                if run.controller_at(k - ticks_per_cycle) != who:
-                    who = "mixed"
-                st = indices_status(idx, who, k // ticks_per_cycle - 1,
-                                    float(run.t[sl.start]), float(run.t[k]))
-                bag.write_diagnostic_array(T.INDICES, stamp, [st])
+            for cycle in scorer.take():
+                if cycle.sums is not None and np.isfinite(run.obs[k, O_HP]).all():
+                    bag.write_diagnostic_array(T.INDICES, stamp, [indices_status(cycle)])
     return path
 
 
-__all__ = ["PARAMS_KEY", "RECORDS_KEY", "SIMULATE_NODE", "SIM_NODE", "TICK_TOPICS", "TOPICS",
-           "ParamRecorder", "param_status", "indices_status", "params_from_custom_data",
-           "status_indices", "write_run_bag"]
+__all__ = [
+    "PARAMS_KEY",
+    "RECORDS_KEY",
+    "SIMULATE_NODE",
+    "SIM_NODE",
+    "TICK_TOPICS",
+    "TOPICS",
+    "ParamRecorder",
+    "indices_status",
+    "param_status",
+    "params_from_custom_data",
+    "status_indices",
+    "write_run_bag",
+]

@@ -1,13 +1,16 @@
-"""The topic contract (graph.md "Topics") as data: names, joint-name lists, and the mapping
-between the engine's arrays and the (name, position, velocity, effort) columns of each
-``sensor_msgs/JointState`` topic. ROS-free: the nodes fill messages from these arrays, the
-in-process recorder writes the same columns as CDR, and the analysis reads them back.
+"""The topic contract (graph.md "Topics") as data: names, the one topic table (type, QoS,
+depth: :data:`TOPICS`, read by the nodes, the recorder and ``simulate --bag``), joint-name
+lists, and the mapping between the engine's arrays and the (name, position, velocity,
+effort) columns of each ``sensor_msgs/JointState`` topic. ROS-free: the nodes fill messages
+from these arrays, the in-process recorder writes the same columns as CDR, and the analysis
+reads them back.
 
 Every JointState topic fills all three arrays (an empty trailing float64[] is padded by
 rclpy's serializer in a way other readers reject, graph.md "Pitfalls").
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -27,6 +30,60 @@ CLOCK = "/clock"
 MARKERS = "/hexapod/markers"
 #: Parameter records (core/param_log.py): each node's start values and changes, transient-local.
 PARAMETERS = "/hexapod/parameters"
+
+#: Depth of the publishers' histories of the per-tick topics: how far (in ticks) a slow
+#: reliable reader (the recorder) may lag before the writer drops samples for it.
+HISTORY_DEPTH = 5000
+#: Depth of the recorder's subscriptions (reader-side queue between two takes).
+RECORD_DEPTH = 10000
+#: Depth of the control loop's subscriptions (sim, controllers, trajectory generator,
+#: markers): a process starved of CPU for up to this many ticks (0.2 s at 1 kHz), or a
+#: topic flooded by a process outside the graph (whose messages are dropped, but fill the
+#: queue first), still finds every message it needs. With 10, a controller taking over in
+#: realtime mode on a loaded machine sometimes found the switch tick's state or inputs
+#: rolled out of its queues and never answered it.
+CONTROL_DEPTH = 200
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One contract topic: message type (``pkg/msg/Name``), offered QoS (always reliable,
+    keep-last; ``transient`` = transient-local durability) and publisher history depth.
+
+    Reference and commands are transient-local so that a reader matched a little late (at
+    start, or a controller or recorder started mid-run) still gets the recent samples.
+    """
+
+    msg_type: str
+    transient: bool = False
+    depth: int = HISTORY_DEPTH
+
+    @property
+    def preset(self) -> str:
+        """The bag's QoS preset of this topic ('reliable' or 'transient_local')."""
+        return "transient_local" if self.transient else "reliable"
+
+
+#: The one topic table: every topic of the contract, as published, subscribed and recorded.
+TOPICS: dict[str, TopicSpec] = {
+    CLOCK: TopicSpec("rosgraph_msgs/msg/Clock"),
+    JOINT_STATES: TopicSpec(JOINT_STATE),
+    FOOT_FORCES: TopicSpec(JOINT_STATE),
+    HIP_STATES: TopicSpec(JOINT_STATE),
+    REFERENCE: TopicSpec(JOINT_STATE, transient=True),
+    JOINT_COMMANDS: TopicSpec(JOINT_STATE, transient=True),
+    ACTIVE_CONTROLLER: TopicSpec("std_msgs/msg/String", transient=True, depth=1),
+    INDICES: TopicSpec(DIAGNOSTIC_ARRAY, depth=100),
+    STATUS: TopicSpec(DIAGNOSTIC_ARRAY, depth=10),
+    MARKERS: TopicSpec("visualization_msgs/msg/MarkerArray", depth=100),
+    PARAMETERS: TopicSpec(DIAGNOSTIC_ARRAY, transient=True, depth=1000),
+}
+#: The topics published at every control tick: the recorder cuts its chunks at the same
+#: tick of all of them (so a killed recorder truncates them all at one tick).
+TICK_TOPICS = (CLOCK, JOINT_STATES, FOOT_FORCES, HIP_STATES, REFERENCE, JOINT_COMMANDS)
 
 JOINT_NAMES = tuple(f"leg{i + 1}_{j}" for i in range(N_LEGS) for j in ("hip", "knee"))
 FOOT_NAMES = tuple(f"leg{i + 1}_foot_{a}" for i in range(N_LEGS) for a in ("x", "y"))
@@ -105,5 +162,5 @@ def stamp_ns(t: float) -> int:
 
 
 __all__ = [n for n in dir() if n.isupper()] + [
-    "Columns", "command_columns", "obs_from_columns", "reference_columns", "split_reference",
-    "stamp_ns", "state_columns"]
+    "Columns", "TopicSpec", "command_columns", "obs_from_columns", "reference_columns",
+    "split_reference", "stamp_ns", "state_columns"]
