@@ -89,6 +89,7 @@ from .core.layout import O_THV, P_TMAX
 from .core.msg_auth import AuthError
 from .core.params import N_LEGS, HexapodParams, check_controller
 from .core.switch_channel import ChannelError, SwitchServer
+from .core import trace as _trace
 from .hot_loop import FastLogger, HotLoop, init_rclpy, install_stop_signals
 from .param_topic import ParamAnnouncer
 from .input_guard import InputGuard
@@ -352,6 +353,8 @@ class SimNode(Node):
     # ------------------------------------------------------------------ ticks
     def _prepare(self) -> None:
         """Sample the current tick and serialize its messages (not sent yet)."""
+        if _trace.TRACER is not None:
+            _trace.TRACER.mark(_trace.PREP0)
         k = self.physics.tick
         self.obs = obs = self.physics.observe()
         stamp = T.stamp_ns(k * self.period)
@@ -376,8 +379,15 @@ class SimNode(Node):
         self.answered = False
         self.advanced = False
         self.published_at = time.monotonic()  # the round trip counts from here
+        tr = _trace.TRACER
+        if tr is not None:
+            tr.mark(_trace.PUB0, stamp=stamp)
         for pub, data in out:
             pub.publish(data)
+            if tr is not None:
+                tr.mark(_trace.PUB1, pub.topic_name, stamp)
+        if self.channel is not None:  # while the controllers work: off the round trip
+            self._serve_channel()  # (a switch asked for now applies at the next boundary)
         now = time.monotonic()
         if self.stop_at_end and k >= self.end_tick:
             self.finished = True
@@ -509,9 +519,12 @@ class SimNode(Node):
             damping = -self.params.sim.fallback_damping * self.obs[O_THV]
             saturate(damping, P[P_TMAX], self.torque)
         # else: hold self.torque, the torque applied over the last period
+        tr = _trace.TRACER
+        if tr is not None:
+            tr.mark(_trace.STEP0, stamp=self.stamp)
         self.physics.advance_tick(self.torque)
-        if self.channel is not None:
-            self._serve_channel()
+        if tr is not None:
+            tr.mark(_trace.STEP1, stamp=self.stamp)
         if self.switch_to and self.physics.tick * self.period >= self.switch_at - 1e-12:
             to, self.switch_to = self.switch_to, ""
             result = self.set_parameters([Parameter("run.controller", value=to)])[0]
