@@ -36,7 +36,7 @@ def run_once(backend: list[str], out: Path, quick: bool, nice: int) -> dict[str,
     cmd = ["nice", "-n", str(nice), sys.executable, "-m", "hexapod_metrics.cli", "reproduce",
            *(["--quick"] if quick else []), *backend, "--no-progress", "--out", str(out)]
     load0, cpu0, t0 = os.getloadavg()[0], _children_cpu(), time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    r = subprocess.run(cmd, check=False, capture_output=True, text=True)
     wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
     if r.returncode:
         raise RuntimeError(f"{' '.join(cmd)} exited {r.returncode}: {r.stderr.strip()[-400:]}")

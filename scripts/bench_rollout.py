@@ -30,23 +30,26 @@ import os
 import statistics
 import sys
 import time
-from typing import Any, Callable
-
-import numpy as np
-
-import numba
-from numba import njit, prange
+from collections.abc import Callable
+from typing import Any
 
 import mujoco
-from mujoco import rollout as mj_rollout
-
+import numba
+import numpy as np
 from hexapod_control.core.closed_loop import Case, run_batch
 from hexapod_sim import mujoco_model as mm
 from hexapod_sim.core import engine
 from hexapod_sim.core import layout as L
-from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_scratch,
-                                            block_solve)
+from hexapod_sim.core.batch_physics import (
+    LANES,
+    block_integrate,
+    block_prepare,
+    block_scratch,
+    block_solve,
+)
 from hexapod_sim.core.params import N_LEGS, load_params
+from mujoco import rollout as mj_rollout
+from numba import njit, prange
 
 S2_TARGET_RATIO = 3.0  # ours >= 3x mujoco.rollout (quality.md S2)
 

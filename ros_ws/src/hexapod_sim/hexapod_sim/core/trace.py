@@ -50,7 +50,7 @@ def header_stamp(data: bytes) -> int:
     if len(data) < 12:
         return -1
     sec, nsec = _STAMP.unpack_from(data, 4)
-    return sec * 1_000_000_000 + nsec
+    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 class Tracer:

@@ -12,6 +12,7 @@ per-message costs.
 """
 from __future__ import annotations
 
+import itertools
 import statistics
 from pathlib import Path
 from typing import NamedTuple
@@ -19,8 +20,24 @@ from typing import NamedTuple
 import numpy as np
 
 from . import topics as T
-from .trace import (CHECKED, DECODED, LAW0, LAW1, PREP0, PUB0, PUB1, SIGN0, SIGN1, STEP0,
-                    STEP1, TAKE0, TAKE1, TOPIC_ID, VERIFIED, WAKE)
+from .trace import (
+    CHECKED,
+    DECODED,
+    LAW0,
+    LAW1,
+    PREP0,
+    PUB0,
+    PUB1,
+    SIGN0,
+    SIGN1,
+    STEP0,
+    STEP1,
+    TAKE0,
+    TAKE1,
+    TOPIC_ID,
+    VERIFIED,
+    WAKE,
+)
 
 JS, CMD = TOPIC_ID[T.JOINT_STATES], TOPIC_ID[T.JOINT_COMMANDS]
 #: Segments of a tick, in order: (name, where it runs).
@@ -117,7 +134,7 @@ def breakdown(traces: dict[str, np.ndarray], controller: str, skip: int = 100) -
     # The sim's signing of the next tick's messages: (SIGN0, SIGN1) pairs in time order.
     sig = order[(order[:, 0] == SIGN0) | (order[:, 0] == SIGN1)]
     pairs: dict[int, list[tuple[int, int]]] = {}
-    for a, b in zip(sig[:-1], sig[1:]):
+    for a, b in itertools.pairwise(sig):
         if a[0] == SIGN0 and b[0] == SIGN1 and a[1] in (JS, TOPIC_ID[T.FOOT_FORCES],
                                                         TOPIC_ID[T.HIP_STATES]):
             pairs.setdefault(int(a[2]), []).append((int(a[3]), int(b[3])))
@@ -148,7 +165,7 @@ def breakdown(traces: dict[str, np.ndarray], controller: str, skip: int = 100) -
              c_sign0[s][3], c_pub0[s][3], st[4], st[5], woke(s_wakes, st[5], s_take0[s][3]),
              s_take0[s][3], st[3], s_ver[s][3], s_dec[s][3], s_chk[s][3], step0[s][3],
              step1[s][3], prep_t[j]]
-        seg = [float(y - x) for x, y in zip(b[:-1], b[1:])]
+        seg = [float(y - x) for x, y in itertools.pairwise(b)]
         # sampling/encoding = the gaps before each signature; signing = the signatures
         enc, sign, last = 0.0, 0.0, float(prep_t[j])
         for a0, a1 in sg:
@@ -172,7 +189,7 @@ def breakdown(traces: dict[str, np.ndarray], controller: str, skip: int = 100) -
         m = traces["metrics"]
         m = m[np.argsort(m[:, 3], kind="stable")]
         stages: dict[str, list[int]] = {"take": [], "verify": [], "decode": [], "checks": []}
-        for a, b in zip(m[:-1], m[1:]):
+        for a, b in itertools.pairwise(m):
             key = {(TAKE0, TAKE1): "take", (TAKE1, VERIFIED): "verify",
                    (VERIFIED, DECODED): "decode", (DECODED, CHECKED): "checks"}.get(
                        (int(a[0]), int(b[0])))
@@ -205,4 +222,4 @@ def format_breakdown(b: Breakdown) -> list[str]:
     return lines
 
 
-__all__ = ["Breakdown", "SEGMENTS", "breakdown", "format_breakdown", "load"]
+__all__ = ["SEGMENTS", "Breakdown", "breakdown", "format_breakdown", "load"]
