@@ -144,9 +144,15 @@ class DaskBackend:
         from distributed import Client, LocalCluster
 
         if self.address.startswith(LOCAL_PREFIX):
+            import dask
+
             n = local_workers(self.address)
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None)
+            # Without the workers' sampling profiler (a stack walk every 10 ms in each
+            # worker, for a dashboard this cluster does not have).
+            with dask.config.set({"distributed.worker.profile.enabled": False}):
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1,
+                                             processes=True, host="127.0.0.1",
+                                             dashboard_address=None)
             self._client = Client(self._cluster)
             return self._client
         try:
