@@ -108,9 +108,10 @@ def _cpu_per_tick(rows: np.ndarray, t_from: int, t_to: int, ticks: int, col: int
                   ) -> float:
     """CPU ms per tick between two wall times (col 4: main thread, 5: whole process)."""
     w = rows[(rows[:, 0] == WAKE) & (rows[:, 3] >= t_from) & (rows[:, 3] <= t_to)]
-    if len(w) < 2 or ticks <= 0:
+    if len(w) < 2 or ticks <= 0 or w[-1, 3] == w[0, 3]:
         return float("nan")
-    return float(w[-1, col] - w[0, col]) / ticks / 1e6
+    share = float(w[-1, col] - w[0, col]) / float(w[-1, 3] - w[0, 3])  # CPU s per wall s
+    return share * (t_to - t_from) / ticks / 1e6
 
 
 def breakdown(traces: dict[str, np.ndarray], controller: str, skip: int = 100) -> Breakdown:
