@@ -150,13 +150,13 @@ class DaskBackend:
             # Without the workers' sampling profiler (a stack walk every 10 ms in each
             # worker, for a dashboard this cluster does not have).
             with dask.config.set({"distributed.worker.profile.enabled": False}):
-                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1,
-                                             processes=True, host="127.0.0.1",
-                                             dashboard_address=None)
-            self._client = Client(self._cluster)
+                self._cluster = LocalCluster(  # type: ignore[no-untyped-call]
+                    n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                    dashboard_address=None)
+            self._client = Client(self._cluster)  # type: ignore[no-untyped-call]
             return self._client
         try:
-            self._client = Client(self.address, timeout="10s")
+            self._client = Client(self.address, timeout="10s")  # type: ignore[no-untyped-call]
         except OSError as err:
             raise ConnectionError(f"cannot reach the Dask scheduler at {self.address}: "
                                   f"{err}") from err
@@ -179,7 +179,7 @@ class DaskBackend:
         futures = client.map(_single_threaded, [(_Indexed(fn), (k, x))
                                                 for k, x in enumerate(items)], pure=False)
         try:
-            for fut in dask_completed(futures):
+            for fut in dask_completed(futures):  # type: ignore[no-untyped-call]
                 yield fut.result()
         finally:
             client.cancel(futures)
