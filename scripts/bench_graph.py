@@ -19,8 +19,17 @@ real time and, in realtime mode, 100 % of ticks on time in some runs but a colla
 Each run first measures how much of a core a busy loop gets for 1 s: the machine is
 shared with load that ps does not show, and the figures move with it.
 
+With --breakdown every node records timestamps of its per-tick work
+(``hexapod_sim.core.trace``, HEXAPOD_TRACE_DIR) and each S4 run prints where a tick's wall
+time goes (``hexapod_sim.core.trace_breakdown``): DDS delivery (the samples' source and
+reception timestamps), wake-ups, takes, verification, decoding, checks, the control law,
+encoding, signing, publishing, the physics step; the segments add up to the tick period.
+Tracing costs a few microseconds per event, so the breakdown runs are a little slower than
+untraced ones: take S4's figure from a run without it. --auth off runs the graph without
+message authentication (to measure what it costs).
+
 Usage: scripts/bench_graph.py [--runs 3] [--duration 10] [--only s4|s5] [--rates 1000,2000]
-       [--rt]
+       [--rt] [--breakdown] [--auth on|off]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
@@ -56,13 +65,19 @@ RT_PREFIX = ("chrt", "-f", "10")
 
 
 def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool = False,
-              rate: float = 1000.0) -> dict[str, float]:
+              rate: float = 1000.0, trace_dir: Path | None = None, auth: str = "on"
+              ) -> dict[str, float]:
     """One graph run at control rate ``rate`` (Hz); the sim's summary figures and each
-    node's CPU seconds."""
+    node's CPU seconds; with ``trace_dir`` every node writes its trace there."""
     from hexapod_metrics.cmd_graph import GraphProcesses
+    from hexapod_sim.core.msg_auth import AUTH_ENV
+    from hexapod_sim.core.trace import TRACE_ENV
 
-    g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
-                       overrides=(f"sim.control_period:={1.0 / rate!r}",))
+    env = {"ROS_DOMAIN_ID": str(domain), AUTH_ENV: auth}
+    if trace_dir is not None:
+        trace_dir.mkdir(parents=True, exist_ok=True)
+        env[TRACE_ENV] = str(trace_dir)
+    g = GraphProcesses(log_dir, env=env, overrides=(f"sim.control_period:={1.0 / rate!r}",))
     prefix = RT_PREFIX if rt else ()
     try:
         g.start("metrics", f"bag_path:={log_dir / 'bag'}")
@@ -92,6 +107,17 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool =
                                                                   in cpu.items()}}
 
 
+def print_breakdown(trace_dir: Path, rate: float) -> None:
+    """Print the traced run's tick breakdown (hexapod_sim.core.trace_breakdown)."""
+    from hexapod_sim.core.params import load_params
+    from hexapod_sim.core.trace_breakdown import breakdown, format_breakdown, load
+
+    b = breakdown(load(trace_dir), load_params().run.controller)
+    print(f"breakdown of a lockstep tick at {rate / 1000:g} kHz over {b.ticks} ticks (ms; "
+          f"load average {os.getloadavg()[0]:.2f}):")
+    print("\n".join(format_breakdown(b)), flush=True)
+
+
 def cpu_available(seconds: float = 1.0) -> float:
     """Share of wall time a busy loop actually runs (gaps > 1 ms count as lost): the
     machine is shared, and other tenants' load (invisible to ps) shows up here."""
@@ -115,10 +141,15 @@ def main() -> int:
                     help="S4: control rates in Hz, comma-separated (S5 runs at 1 kHz)")
     ap.add_argument("--rt", action="store_true",
                     help="real-time scheduling (chrt -f 10) for all nodes but the recorder")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="S4: trace every node and print where each tick's time goes")
+    ap.add_argument("--auth", choices=("on", "off"), default="on",
+                    help="message authentication of the graph (default on)")
     args = ap.parse_args()
     if args.rt and subprocess.run([*RT_PREFIX, "true"], capture_output=True).returncode:
         ap.error("--rt: chrt -f 10 is not permitted here (needs CAP_SYS_NICE)")
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, "
+          f"authentication {args.auth}"
           + (", real-time scheduling (chrt -f 10) for sim, controllers, trajectory" if args.rt
              else ", default scheduling (recorder at nice 10)"))
     base = 150 + os.getpid() % 80
@@ -131,8 +162,10 @@ def main() -> int:
             rows = []
             for i in range(args.runs):
                 avail = cpu_available()
-                r = run_graph(mode, args.duration, (base + 7 * j + i) % 101 + 1,
-                              Path(tmp) / f"{key}_{j}_{i}", args.rt, rate)
+                run_dir = Path(tmp) / f"{key}_{j}_{i}"
+                traced = args.breakdown and key == "s4"
+                r = run_graph(mode, args.duration, (base + 7 * j + i) % 101 + 1, run_dir,
+                              args.rt, rate, run_dir / "trace" if traced else None, args.auth)
                 rows.append(r)
                 cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
                 print(f"{key} {rate / 1000:g} kHz run {i + 1} (a busy loop got "
@@ -142,6 +175,8 @@ def main() -> int:
                       f"{r['late']}, on time {r['on_time']}, round trip median "
                       f"{r['rt_median']:.2f} ms p99 {r['rt_p99']:.2f} ms; CPU s: {cpu}",
                       flush=True)
+                if traced:
+                    print_breakdown(run_dir / "trace", rate)
             if key == "s4":
                 med = statistics.median(r["rtf"] for r in rows)
                 target = {1000.0: ">= 2.5", 2000.0: ">= 1.0"}.get(rate, "no target")

@@ -10,6 +10,7 @@ from hexapod_metrics.core.experiments import (ground_sweep, hip_score, select_be
 from hexapod_metrics.core.indices import Indices
 from hexapod_metrics.core.parallel import InlineBackend, ProcessBackend, make_backend
 from hexapod_metrics.core.simulate import Outcome, simulate
+from hexapod_sim.core.layout import O_TQ
 from hexapod_sim.core.params import load_params
 
 PERCENTS = (20.0, 100.0, 500.0)
@@ -38,6 +39,43 @@ def test_sweep_on_a_local_dask_cluster_equals_local_processes():
         dask = ground_sweep(p, PERCENTS, 400.0, backend=backend)
     local = ground_sweep(p, PERCENTS, 400.0, backend=ProcessBackend(2))
     assert _rows(dask) == _rows(local)
+
+
+def _torque_peak(case):
+    """Module level, so that a Dask worker can unpickle it."""
+    sim = simulate(case.params, case.controller)
+    return float(np.abs(sim.run.obs[:, O_TQ]).max()), sim.indices.eps_xH
+
+
+def test_local_dask_cluster_spreads_batches_and_single_runs_like_the_process_pool():
+    """`--dask local:2`: the backend starts its own 2-worker cluster, runs the batches
+    (convergence checks included) and the single runs a report needs (calls), with the
+    same numbers as the process pool, and stops the cluster at close()."""
+    pytest.importorskip("distributed", reason="dask.distributed not installed")
+    p = load_params()
+    cases = [Case(p.with_values(**{"ground.scale": s}), c)
+             for s in (0.5, 2.0) for c in ("pd_p", "pd_pf")]
+    procs = ProcessBackend(2)
+    try:
+        local = ground_sweep(p, PERCENTS[:2], 400.0, backend=procs, check=True)
+        local_calls = dict(procs.calls(_torque_peak, cases))
+    finally:
+        procs.close()
+    with make_backend("dask", "local:2") as dask:
+        assert dask.workers == 2
+        on_dask = ground_sweep(p, PERCENTS[:2], 400.0, backend=dask, check=True)
+        dask_calls = dict(dask.calls(_torque_peak, cases))
+        cluster = dask._cluster
+    assert dask._cluster is None and cluster.status.name == "closed"
+    assert _rows(on_dask) == _rows(local)
+    assert [r["converged"] for r in on_dask.rows()] == [r["converged"] for r in local.rows()]
+    assert dask_calls == local_calls and sorted(dask_calls) == [0, 1, 2, 3]
+
+
+def test_dask_local_cluster_needs_a_worker_count():
+    for bad in ("local:0", "local:two", "local:"):
+        with pytest.raises(ValueError, match="local:N with N >= 1"):
+            make_backend("dask", bad)
 
 
 def test_dask_backend_needs_an_address_and_a_reachable_scheduler():

@@ -111,9 +111,12 @@ class Hostile:
         if sign and topic in self.signers:
             data = self.signers[topic].sign(data)
             kind += " (signed)"
-        self.mine.add(data)
-        self.mine_order.append(data)
-        if len(self.mine_order) > 5000:
+        # Fast DDS pads a sample to 4 bytes on the way: the copy that comes back to our own
+        # subscription may be longer than what we sent (and must not pass for genuine).
+        for copy in {data, data + b"\0" * (-len(data) % 4)}:
+            self.mine.add(copy)
+            self.mine_order.append(copy)
+        while len(self.mine_order) > 10000:
             self.mine.discard(self.mine_order.popleft())
         try:
             (self.pubs if data else self.empty_pubs)[topic].publish(data)

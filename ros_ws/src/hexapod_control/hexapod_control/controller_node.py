@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core import topics as T
+from hexapod_sim.core import trace as _trace
 from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.params import N_LEGS, HexapodParams
 from hexapod_sim.hot_loop import FastLogger, HotLoop
@@ -220,21 +221,26 @@ class ControllerNode(LifecycleNode):
         if T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
-            keep = min(self.pending, default=stamp)
-            for buf in (self.refs, self.forces):
-                for s in [s for s in buf if s < keep]:
-                    del buf[s]
-        if in_charge(js.frame_id) != self.arch or not self.active:
-            return
-        self.last_state = stamp
-        self.pending[stamp] = js
-        if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give the oldest up
-            del self.pending[min(self.pending)]
-        self._answer()
-        if self.pending:  # an input is late: let it wake us
-            self.waited += 1
-            self.loop.set_wake(self.subs[T.REFERENCE], True)
-            self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
+        mine = in_charge(js.frame_id) == self.arch and self.active
+        if mine:
+            self.last_state = stamp
+            self.pending[stamp] = js
+            if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give up the oldest
+                del self.pending[min(self.pending)]
+            self._answer()
+            if self.pending:  # an input is late: let it wake us
+                self.waited += 1
+                self.loop.set_wake(self.subs[T.REFERENCE], True)
+                self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
+        # After the command is out (off the round trip): take the next tick's reference if
+        # it is there already (the generator publishes it one tick ahead), so that the next
+        # state finds it checked; forget the inputs of answered ticks.
+        if mine and T.REFERENCE in self.subs:
+            self.loop.take(self.subs[T.REFERENCE])
+        keep = min(self.pending, default=stamp)
+        for buf in (self.refs, self.forces):
+            for s in [s for s in buf if s < keep]:
+                del buf[s]
 
     def _answer(self) -> None:
         """Compute and publish the command of each pending state whose inputs are there."""
@@ -249,10 +255,20 @@ class ControllerNode(LifecycleNode):
             r = T.split_reference(ref.position, ref.velocity)
             self.theta_d[:] = r["theta"]
             self.theta_vel_d[:] = r["theta_vel"]
+            tr = _trace.TRACER
+            if tr is not None:
+                tr.mark(_trace.LAW0, stamp=stamp)
             self._law()
+            if tr is not None:
+                tr.mark(_trace.LAW1, stamp=stamp)
             c = T.command_columns(self.demand)
             data = self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity, c.effort)
-            self.pub.publish(self.cmd_signer.sign(data))
+            data = self.cmd_signer.sign(data)
+            if tr is not None:
+                tr.mark(_trace.PUB0, T.JOINT_COMMANDS, stamp)
+            self.pub.publish(data)
+            if tr is not None:
+                tr.mark(_trace.PUB1, T.JOINT_COMMANDS, stamp)
             self.answered += 1
         if not self.pending:
             self.loop.set_wake(self.subs[T.REFERENCE], False)

@@ -39,7 +39,8 @@ def _backend_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=["processes", "inline", "dask"], default=None,
                         help="where runs execute (default: local processes; dask if --dask)")
     parser.add_argument("--dask", metavar="ADDRESS",
-                        help="scheduler address of an existing Dask cluster (tcp://host:port)")
+                        help="scheduler address of an existing Dask cluster (tcp://host:port), "
+                             "or local:N to start a cluster of N workers on this machine")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

@@ -72,6 +72,25 @@ def _max_torque_step(sim: Simulation) -> float:
     return float(np.nanmax(np.abs(np.diff(tq, axis=0)))) if sim.indices else math.nan
 
 
+def _simulate_job(job: tuple[Case, bool]) -> tuple[float, Simulation | None]:
+    """One single run on a backend worker: (its largest torque step, the whole run if
+    ``keep`` else None: a run's time series are large, most jobs need only the step)."""
+    case, keep = job
+    sim = simulate(case.params, case.controller)
+    return _max_torque_step(sim), (sim if keep else None)
+
+
+def _single_runs(jobs: Sequence[tuple[Case, bool]], backend: Backend,
+                 tick: Callable[[int], None]) -> list[tuple[float, Simulation | None]]:
+    """:func:`_simulate_job` of every job on ``backend`` (spread like the batches), in order;
+    ``tick(1)`` per finished run."""
+    out: list[tuple[float, Simulation | None]] = [(math.nan, None)] * len(jobs)
+    for k, res in backend.calls(_simulate_job, jobs):
+        out[k] = res
+        tick(1)
+    return out
+
+
 def _write_rows(path: Path, rows: list[dict[str, object]]) -> None:
     with path.open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
@@ -335,11 +354,14 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     base_conv = dict(zip(CONTROLLERS, check_cases([Case(p400, c) for c in CONTROLLERS],
                                                   duration, backend, tick)))
     base_pts = {c: claims.point(cv) for c, cv in base_conv.items()}
-    base, fine = {}, {}
-    for c in CONTROLLERS:
-        base[c] = simulate(p400, c)
-        fine[c] = simulate(refined(p400, REFINEMENTS[-1]), c)
-        tick(2)
+    runs = _single_runs([(Case(q, c), True) for c in CONTROLLERS
+                         for q in (p400, refined(p400, REFINEMENTS[-1]))], backend, tick)
+    base: dict[str, Simulation] = {}
+    fine: dict[str, Simulation] = {}
+    for j, c in enumerate(CONTROLLERS):
+        b, f = runs[2 * j][1], runs[2 * j + 1][1]
+        assert b is not None and f is not None
+        base[c], fine[c] = b, f
     if any(s.indices is None for s in base.values()):
         raise ArithmeticError("the base case diverged: check the parameters")
     figs = _time_figures(base, fine, out, [
@@ -403,13 +425,17 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     steps: dict[float, dict[str, Measured]] = {}
     hard_sims, hard_fine = {}, {}
     tick = progress("E4 torque impulses (runs)", n)
+    jobs = [(Case(refined(p.with_values(**{"actuator.t_max": math.inf,
+                                           "ground.scale": pct / 100.0}), f), c),
+             pct == plan.ideal_plot_percent and f in (REFINEMENTS[0], REFINEMENTS[-1]))
+            for pct in plan.ideal_percents for c in CONTROLLERS for f in REFINEMENTS]
+    e4_runs = iter(_single_runs(jobs, backend, tick))
     for pct in plan.ideal_percents:
-        q = p.with_values(**{"actuator.t_max": math.inf, "ground.scale": pct / 100.0})
         steps[pct / 100.0] = {}
         for c in CONTROLLERS:
-            sims = [simulate(refined(q, f), c) for f in REFINEMENTS]
-            vals = [_max_torque_step(s) for s in sims]
-            tick(RUNS)
+            got = [next(e4_runs) for _ in REFINEMENTS]
+            vals = [v for v, _ in got]
+            sims = [s for _, s in got]
             finite = [v for v in vals if not math.isnan(v)]
             ok = len(finite) == len(vals) and abs(vals[1] - vals[2]) < 0.01 * abs(vals[2])
             steps[pct / 100.0][c] = Measured(vals[0], min(finite, default=math.nan),

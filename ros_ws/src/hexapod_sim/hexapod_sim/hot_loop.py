@@ -50,6 +50,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
+from .core import trace
 from .dds_profile import FASTDDS_PROFILE, private_profile
 
 RawCallback = Callable[[bytes], None]
@@ -91,7 +92,7 @@ class HotLoop:
         self._subs: list[tuple[Subscription, Any, RawCallback]] = []
         self._sleeping: set[int] = set()  # id() of subscriptions that do not wake the loop
         self._wait_set: Any = None
-        self._handles: list[tuple[Any, int, Any, RawCallback]] = []
+        self._handles: list[tuple[Any, int, Any, RawCallback, str]] = []
         self._others: tuple[list[Any], list[Any], list[Any]] = ([], [], [])
         self._deadline: float | None = None
         self._deadline_cb: Callable[[], None] | None = None
@@ -135,14 +136,18 @@ class HotLoop:
 
     def take(self, sub: Subscription) -> int:
         """Take every message queued on ``sub`` now and run its callback on each."""
+        tr = trace.TRACER
         for s, msg_type, cb in self._subs:
             if s is sub:
                 h = s.handle
                 n = 0
                 while True:
+                    t0 = time.time_ns() if tr is not None else 0
                     taken = h.take_message(msg_type, True)
                     if taken is None:
                         return n
+                    if tr is not None:
+                        tr.taken(s.topic_name, t0, taken[0], taken[1])
                     cb(taken[0])
                     n += 1
         return 0
@@ -165,8 +170,8 @@ class HotLoop:
     # ------------------------------------------------------------------ spinning
     def _rebuild(self) -> None:
         node = self.node
-        self._handles = [(s.handle, s.handle.pointer, t, cb) for s, t, cb in self._subs
-                         if id(s) not in self._sleeping]
+        self._handles = [(s.handle, s.handle.pointer, t, cb, s.topic_name)
+                         for s, t, cb in self._subs if id(s) not in self._sleeping]
         self._others = ([s.handle for s in node.services], [c.handle for c in node.clients],
                         [t.handle for t in node.timers])
         self._wait_set = _rclpy.WaitSet(len(self._handles), 0, len(self._others[2]),
@@ -186,7 +191,7 @@ class HotLoop:
         timeout = min(timeout, self._next_service - now)
         ws = self._wait_set
         ws.clear_entities()
-        for h, _, _, _ in handles:
+        for h, _, _, _, _ in handles:
             ws.add_subscription(h)
         services, clients, timers = self._others
         for h in services:
@@ -196,14 +201,20 @@ class HotLoop:
         for h in timers:
             ws.add_timer(h)
         ws.wait(max(0, int(timeout * 1e9)))
+        tr = trace.TRACER
+        if tr is not None:
+            tr.wake()
         ready = ws.get_ready_entities('subscription')
         if ready:
-            for h, ptr, msg_type, cb in handles:
+            for h, ptr, msg_type, cb, topic in handles:
                 if ptr in ready:
                     while True:
+                        t0 = time.time_ns() if tr is not None else 0
                         taken = h.take_message(msg_type, True)
                         if taken is None:
                             break
+                        if tr is not None:
+                            tr.taken(topic, t0, taken[0], taken[1])
                         cb(taken[0])
                     if self._wait_set is None:  # a callback changed the subscriptions
                         break

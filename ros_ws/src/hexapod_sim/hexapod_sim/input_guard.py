@@ -23,6 +23,7 @@ from rclpy.serialization import serialize_message
 from . import conversions as C
 from .core import msg_checks as M
 from .core import topics as T
+from .core import trace
 from .core.msg_auth import Rejected, Signer, Unsigned, Verifier, run_key
 
 CONTROLLER_NODES = ("pd_p_controller", "pd_pf_controller")
@@ -68,6 +69,7 @@ class InputGuard:
     def __init__(self, node: Node, log: Any) -> None:
         self.node = node
         self.log = log
+        trace.name_process(node.get_name())
         self.key = run_key()
         self.drops = M.DropCounter()
         self.outsiders: dict[str, set[str]] = {}
@@ -99,10 +101,13 @@ class InputGuard:
     def payload(self, topic: str, data: bytes) -> bytes | None:
         """The authenticated payload of ``data`` (trailer stripped), or None (dropped)."""
         try:
-            return self._verifier(topic).verify(data)
+            payload = self._verifier(topic).verify(data)
         except Rejected as r:
             self.drop(topic, r.cause)
             return None
+        if trace.TRACER is not None:
+            trace.TRACER.mark(trace.VERIFIED, topic, trace.header_stamp(payload))
+        return payload
 
     def joint_state(self, topic: str, data: bytes, period_ns: int,
                     window: M.StampWindow | None = None, advance: bool = False
@@ -120,8 +125,11 @@ class InputGuard:
         payload = self.payload(topic, data)
         if payload is None:
             return None
+        tr = trace.TRACER
         try:
             view = _decode(C.CODECS[topic], payload)
+            if tr is not None:
+                tr.mark(trace.DECODED, topic, view.stamp_ns)
             M.check_finite((view.position, view.velocity, view.effort))
             M.check_stamp(view.stamp_ns, period_ns)
             if window is not None:
@@ -132,6 +140,8 @@ class InputGuard:
         except M.Dropped as d:
             self.drop(topic, d.cause, d.detail)
             return None
+        if tr is not None:
+            tr.mark(trace.CHECKED, topic, view.stamp_ns)
         return payload, view
 
     def string(self, topic: str, data: bytes, allowed: tuple[str, ...]

@@ -36,6 +36,7 @@ from .core.engine import Physics
 from .core.errors import ParameterError
 from .core.params import N_LEGS, HexapodParams, check_controller
 from .core.switch_channel import ChannelError, SwitchServer
+from .core import trace as _trace
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
 from .hot_loop import FastLogger, HotLoop
 from .input_guard import InputGuard
@@ -259,6 +260,8 @@ class SimNode(Node):
     # ------------------------------------------------------------------ ticks
     def _prepare(self) -> None:
         """Sample the current tick and serialize its messages (not sent yet)."""
+        if _trace.TRACER is not None:
+            _trace.TRACER.mark(_trace.PREP0)
         k, stamp, obs, frame = self.ticks.sample()
         cs = self.codecs
         out = []
@@ -280,8 +283,13 @@ class SimNode(Node):
         """Publish the prepared tick and arm the deadline of its command."""
         _, _, out = self.prepared
         self.ticks.sending(time.monotonic())  # the round trip counts from here
+        tr = _trace.TRACER
+        if tr is not None:
+            tr.mark(_trace.PUB0, stamp=self.ticks.stamp)
         for pub, data in out:
             pub.publish(data)
+            if tr is not None:
+                tr.mark(_trace.PUB1, pub.topic_name, self.ticks.stamp)
         wait, when = self.ticks.sent(time.monotonic())
         if wait is Wait.STOP:
             self.loop.set_deadline(None)

@@ -1,22 +1,31 @@
 """Where batches of cases run: in this process, on local worker processes, or on Dask.
 
-A backend maps :func:`evaluate_chunk` over chunks of cases and yields results as chunks
-finish (for progress bars). Backends are chosen by name from :data:`BACKENDS`.
-Every backend returns the same numbers: each case is computed by the same compiled code,
-independently of the others.
+A backend maps :func:`evaluate_chunk` over chunks of cases (:meth:`Backend.map`), or any
+picklable function over items (:meth:`Backend.calls`: the single runs whose whole time
+series a report needs), and yields results as they finish (for progress bars). Backends are
+chosen by name from :data:`BACKENDS`. Every backend returns the same numbers: each case is
+computed by the same compiled code, independently of the others.
+
+Dask: ``--dask tcp://host:port`` joins an existing cluster; ``--dask local:N`` starts a
+cluster of N single-threaded worker processes on this machine (scheduler on 127.0.0.1, no
+dashboard) for the length of the command (:class:`DaskBackend`).
 """
 from __future__ import annotations
 
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Iterator, Protocol, Sequence
+from typing import Any, Callable, Iterator, Protocol, Sequence, TypeVar
 
 from hexapod_control.core.closed_loop import Case, shared_reference_key
 
 from .simulate import Outcome, evaluate_batch
 
 Chunk = tuple[int, Sequence[Case], float]
+T = TypeVar("T")
+R = TypeVar("R")
+#: ``--dask local:N``: a local cluster of N workers instead of a scheduler address.
+LOCAL_PREFIX = "local:"
 
 
 def evaluate_chunk(chunk: Chunk) -> tuple[int, list[Outcome]]:
@@ -26,9 +35,30 @@ def evaluate_chunk(chunk: Chunk) -> tuple[int, list[Outcome]]:
 
 
 class Backend(Protocol):
-    """Runs chunks and yields (start index, outcomes) as they complete."""
+    """Runs chunks (or calls) and yields their results as they complete."""
 
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]: ...
+
+    def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]: ...
+
+
+class _Indexed:
+    """``fn`` applied to (index, item) -> (index, fn(item)); picklable if ``fn`` is."""
+
+    def __init__(self, fn: Callable[[Any], Any]) -> None:
+        self.fn = fn
+
+    def __call__(self, job: tuple[int, Any]) -> tuple[int, Any]:
+        return job[0], self.fn(job[1])
+
+
+def _single_threaded(job: tuple[Callable[[Any], Any], Any]) -> Any:
+    """Run ``fn(item)`` with numba on one thread (a Dask worker thread runs one task)."""
+    import numba
+
+    numba.set_num_threads(1)
+    fn, item = job
+    return fn(item)
 
 
 class InlineBackend:
@@ -37,6 +67,11 @@ class InlineBackend:
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
         for chunk in chunks:
             yield evaluate_chunk(chunk)
+
+    def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]:
+        """(index, fn(item)) for each item, in order."""
+        for k, item in enumerate(items):
+            yield k, fn(item)
 
 
 def _single_threaded_worker() -> None:
@@ -58,11 +93,16 @@ class ProcessBackend:
         self._pool: ProcessPoolExecutor | None = None
 
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
+        for _, result in self.calls(evaluate_chunk, chunks):
+            yield result
+
+    def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]:
+        """(index, fn(item)) as the workers finish them."""
         if self._pool is None:
             ctx = multiprocessing.get_context("spawn")  # no fork of numba's thread pool
             self._pool = ProcessPoolExecutor(self.workers, mp_context=ctx,
                                              initializer=_single_threaded_worker)
-        futures = [self._pool.submit(evaluate_chunk, c) for c in chunks]
+        futures = [self._pool.submit(_Indexed(fn), (k, x)) for k, x in enumerate(items)]
         try:
             for fut in as_completed(futures):
                 yield fut.result()
@@ -84,25 +124,89 @@ class ProcessBackend:
 
 
 class DaskBackend:
-    """An existing Dask cluster, given its scheduler address (tcp://host:port)."""
+    """A Dask cluster: an existing one by scheduler address (``tcp://host:port``), or
+    ``local:N``, a cluster of N single-threaded worker processes started on this machine
+    (scheduler on 127.0.0.1, no dashboard) and stopped by :meth:`close`.
+
+    One client serves every :meth:`map` of the command (connecting costs a round trip to
+    the scheduler). Each task runs numba on one thread: a worker runs as many tasks at once
+    as it has threads.
+    """
 
     def __init__(self, address: str) -> None:
         self.address = address
+        self._client: Any = None
+        self._cluster: Any = None
 
-    def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
-        from distributed import Client, as_completed as dask_completed
+    def _connect(self) -> Any:
+        if self._client is not None:
+            return self._client
+        from distributed import Client, LocalCluster
 
+        if self.address.startswith(LOCAL_PREFIX):
+            import dask
+
+            n = local_workers(self.address)
+            # Without the workers' sampling profiler (a stack walk every 10 ms in each
+            # worker, for a dashboard this cluster does not have).
+            with dask.config.set({"distributed.worker.profile.enabled": False}):
+                self._cluster = LocalCluster(  # type: ignore[no-untyped-call]
+                    n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                    dashboard_address=None)
+            self._client = Client(self._cluster)  # type: ignore[no-untyped-call]
+            return self._client
         try:
-            client = Client(self.address, timeout="10s")  # type: ignore[no-untyped-call]
+            self._client = Client(self.address, timeout="10s")  # type: ignore[no-untyped-call]
         except OSError as err:
             raise ConnectionError(f"cannot reach the Dask scheduler at {self.address}: "
                                   f"{err}") from err
+        return self._client
+
+    @property
+    def workers(self) -> int:
+        """Worker processes of the cluster (connects if needed)."""
+        return len(self._connect().scheduler_info()["workers"])
+
+    def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
+        for _, result in self.calls(evaluate_chunk, chunks):
+            yield result
+
+    def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]:
+        """(index, fn(item)) as the cluster finishes them."""
+        from distributed import as_completed as dask_completed
+
+        client = self._connect()
+        futures = client.map(_single_threaded, [(_Indexed(fn), (k, x))
+                                                for k, x in enumerate(items)], pure=False)
         try:
-            futures = client.map(evaluate_chunk, list(chunks), pure=False)
             for fut in dask_completed(futures):  # type: ignore[no-untyped-call]
                 yield fut.result()
         finally:
-            client.close()  # type: ignore[no-untyped-call]
+            client.cancel(futures)
+
+    def close(self) -> None:
+        """Close the client, and stop the local cluster if this backend started it."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
+
+    def __enter__(self) -> "DaskBackend":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def local_workers(address: str) -> int:
+    """N of a ``local:N`` address; ValueError unless N is a whole number >= 1."""
+    text = address[len(LOCAL_PREFIX):]
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"--dask {address}: expected local:N with N >= 1 workers, "
+                         f"e.g. local:2")
+    return int(text)
 
 
 BACKENDS: dict[str, Callable[..., Backend]] = {
@@ -115,7 +219,10 @@ def make_backend(name: str = "processes", address: str | None = None) -> Backend
         raise ValueError(f"unknown backend {name!r}: one of {', '.join(BACKENDS)}")
     if name == "dask":
         if not address:
-            raise ValueError("the dask backend needs a scheduler address (--dask tcp://...)")
+            raise ValueError("the dask backend needs a scheduler address (--dask tcp://...) "
+                             "or a local cluster (--dask local:N)")
+        if address.startswith(LOCAL_PREFIX):
+            local_workers(address)  # checked before anything starts
         return DaskBackend(address)
     return BACKENDS[name]()
 
@@ -147,5 +254,5 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
     return [r for r in results if r is not None]
 
 
-__all__ = ["BACKENDS", "Backend", "DaskBackend", "InlineBackend", "ProcessBackend",
-           "evaluate_chunk", "make_backend", "run_cases"]
+__all__ = ["BACKENDS", "Backend", "DaskBackend", "InlineBackend", "LOCAL_PREFIX",
+           "ProcessBackend", "evaluate_chunk", "local_workers", "make_backend", "run_cases"]

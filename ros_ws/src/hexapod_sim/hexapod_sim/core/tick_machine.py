@@ -34,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import labels as L
+from . import trace as _trace
 from .actuator import saturate
 from .engine import Physics
 from .layout import O_THV, P_TMAX
@@ -306,7 +307,12 @@ class TickMachine:
             damping = -self.params().sim.fallback_damping * self.obs[O_THV]
             saturate(damping, P[P_TMAX], self.torque)
         # else: hold self.torque, the torque applied over the last period
+        tr = _trace.TRACER
+        if tr is not None:
+            tr.mark(_trace.STEP0, stamp=self.stamp)
         self.physics.advance_tick(self.torque)
+        if tr is not None:
+            tr.mark(_trace.STEP1, stamp=self.stamp)
         self.hooks.at_boundary(self.tick)
         if self.pending_params is not None:
             self.physics.set_params(self.pending_params)

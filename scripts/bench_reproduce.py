@@ -1,0 +1,86 @@
+#!/usr/bin/env python3
+"""Benchmark R: `hexapod reproduce` on the local process pool against a local Dask cluster.
+
+Runs ``hexapod reproduce`` (``--quick`` unless ``--full``) alternately with ``--backend
+processes`` (one worker process per core) and ``--dask local:N`` (a local Dask cluster of N
+single-threaded workers), ``--reps`` times each, every run niced (``--nice``, the machine is
+shared), and prints each run's wall time, the CPU seconds of the command and its workers,
+the load average around it, and the medians; it also checks that both backends wrote the
+same claims and numbers (results.json).
+
+Usage: python scripts/bench_reproduce.py [--reps 2] [--workers 2] [--nice 10] [--full]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+TARGET_S = {"quick": 120.0, "full": 600.0}
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def run_once(backend: list[str], out: Path, quick: bool, nice: int) -> dict[str, float]:
+    """One `hexapod reproduce`; wall s, CPU s (command and workers), load before/after."""
+    cmd = ["nice", "-n", str(nice), sys.executable, "-m", "hexapod_metrics.cli", "reproduce",
+           *(["--quick"] if quick else []), *backend, "--no-progress", "--out", str(out)]
+    load0, cpu0, t0 = os.getloadavg()[0], _children_cpu(), time.perf_counter()
+    r = subprocess.run(cmd, check=False, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
+    if r.returncode:
+        raise RuntimeError(f"{' '.join(cmd)} exited {r.returncode}: {r.stderr.strip()[-400:]}")
+    return {"wall": wall, "cpu": cpu, "load0": load0, "load1": os.getloadavg()[0]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--nice", type=int, default=10)
+    ap.add_argument("--full", action="store_true", help="the whole reproduction, not --quick")
+    args = ap.parse_args(argv)
+    kind = "full" if args.full else "quick"
+    backends = {"processes": ["--backend", "processes"],
+                f"dask local:{args.workers}": ["--dask", f"local:{args.workers}"]}
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; "
+          f"reproduce {'--quick' if kind == 'quick' else '(full)'}, nice {args.nice}",
+          flush=True)
+    rows: dict[str, list[dict[str, float]]] = {k: [] for k in backends}
+    results: dict[str, object] = {}
+    with tempfile.TemporaryDirectory(prefix="bench_reproduce_") as tmp:
+        for i in range(args.reps):
+            for name, opts in backends.items():
+                out = Path(tmp) / f"{name.replace(' ', '_').replace(':', '')}_{i}"
+                r = run_once(opts, out, kind == "quick", args.nice)
+                rows[name].append(r)
+                doc = json.loads((out / "results.json").read_text())
+                results.setdefault(name, doc)
+                print(f"{name} run {i + 1}: wall {r['wall']:.1f} s, CPU {r['cpu']:.1f} s "
+                      f"(command + workers), load average {r['load0']:.1f} -> "
+                      f"{r['load1']:.1f}", flush=True)
+    docs = list(results.values())
+    same = all(json.dumps(d, sort_keys=True) == json.dumps(docs[0], sort_keys=True)
+               for d in docs)
+    print(f"results.json identical across backends: {'yes' if same else 'NO'}")
+    for name, rs in rows.items():
+        wall = statistics.median(r["wall"] for r in rs)
+        cpu = statistics.median(r["cpu"] for r in rs)
+        print(f"R reproduce {kind} on {name}: median wall {wall:.1f} s, CPU {cpu:.1f} s over "
+              f"{len(rs)} runs (target < {TARGET_S[kind]:g} s; gap {wall / TARGET_S[kind]:.2f})")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
