@@ -7,7 +7,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -201,50 +201,55 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     return 0
 
 
+_Opt = tuple[tuple[str, ...], dict[str, Any]]
+
+
+def _opt(*flags: str, **kw: Any) -> _Opt:
+    return flags, kw
+
+
+#: The experiment commands: name, help, handler, own options (each also takes the params
+#: options and the backend options).
+COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt, ...]], ...] = (
+    ("sweep", "ground or T_max sweep for both controllers (E2-E4)", _cmd_sweep, (
+        _opt("kind", choices=["ground", "tmax"], help="what to sweep"),
+        _opt("--range", default=None,
+             help="values: 'lo:hi:n' log-spaced, 'lo:hi:n:lin', or 'a,b,c'; ground in "
+             "%% (default 10:1000:21), T_max in N m (default 100:400:13:lin)"),
+        _opt("--t-max-list", default="400,170", dest="t_max_list",
+             help="ground sweep: T_max values, one sweep each (default 400,170)"),
+        _opt("--controllers", default="pd_p,pd_pf"),
+        _opt("--out", default="sweeps", help="output directory (CSV, JSON, PNG)"),
+        _opt("--check", action="store_true",
+             help="rerun every point at dt/2 and dt/4 and report its convergence"))),
+    ("converge", "rerun a case at dt/2 and dt/4: is it converged?", _cmd_converge, (
+        _opt("--controller", choices=["pd_p", "pd_pf", "both"], default="both"),
+        _opt("--json", help="write the three runs and the verdicts to this file"),
+        _opt("--strict", action="store_true",
+             help="exit with code 1 if a controller's indices are not converged"))),
+    ("tune", "brute-force gain search (E5)", _cmd_tune, (
+        _opt("--controller", choices=["pd_p", "pd_pf"], required=True),
+        _opt("--factors", default="0.5,0.75,1,1.5,2",
+             help="default grid: each gain of the params file times these factors"),
+        _opt("--grid", action="append", default=[], metavar="GAIN=VALUES",
+             help="explicit values for one gain, e.g. kp1=5000:160000:16"),
+        _opt("--json", help="write every evaluated set to this JSON file"))),
+    ("reproduce", "run E1-E6, check every point in dt, write the report", _cmd_reproduce, (
+        _opt("--out", default="report", help="report directory (default report/)"),
+        _opt("--quick", action="store_true",
+             help="a few points per experiment (every point still checked in dt)"))),
+)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register sweep, converge, tune and reproduce."""
-    sp = sub.add_parser("sweep", help="ground or T_max sweep for both controllers (E2-E4)")
-    params_arguments(sp)
-    sp.add_argument("kind", choices=["ground", "tmax"], help="what to sweep")
-    sp.add_argument("--range", default=None,
-                    help="values: 'lo:hi:n' log-spaced, 'lo:hi:n:lin', or 'a,b,c'; ground in "
-                    "%% (default 10:1000:21), T_max in N m (default 100:400:13:lin)")
-    sp.add_argument("--t-max-list", default="400,170", dest="t_max_list",
-                    help="ground sweep: T_max values, one sweep each (default 400,170)")
-    sp.add_argument("--controllers", default="pd_p,pd_pf")
-    sp.add_argument("--out", default="sweeps", help="output directory (CSV, JSON, PNG)")
-    sp.add_argument("--check", action="store_true",
-                    help="rerun every point at dt/2 and dt/4 and report its convergence")
-    _backend_args(sp)
-    sp.set_defaults(func=_cmd_sweep)
-
-    cp = sub.add_parser("converge", help="rerun a case at dt/2 and dt/4: is it converged?")
-    params_arguments(cp)
-    cp.add_argument("--controller", choices=["pd_p", "pd_pf", "both"], default="both")
-    cp.add_argument("--json", help="write the three runs and the verdicts to this file")
-    cp.add_argument("--strict", action="store_true",
-                    help="exit with code 1 if a controller's indices are not converged")
-    _backend_args(cp)
-    cp.set_defaults(func=_cmd_converge)
-
-    tp = sub.add_parser("tune", help="brute-force gain search (E5)")
-    params_arguments(tp)
-    tp.add_argument("--controller", choices=["pd_p", "pd_pf"], required=True)
-    tp.add_argument("--factors", default="0.5,0.75,1,1.5,2",
-                    help="default grid: each gain of the params file times these factors")
-    tp.add_argument("--grid", action="append", default=[], metavar="GAIN=VALUES",
-                    help="explicit values for one gain, e.g. kp1=5000:160000:16")
-    tp.add_argument("--json", help="write every evaluated set to this JSON file")
-    _backend_args(tp)
-    tp.set_defaults(func=_cmd_tune)
-
-    rp = sub.add_parser("reproduce", help="run E1-E6, check every point in dt, write the report")
-    params_arguments(rp)
-    rp.add_argument("--out", default="report", help="report directory (default report/)")
-    rp.add_argument("--quick", action="store_true",
-                    help="a few points per experiment (every point still checked in dt)")
-    _backend_args(rp)
-    rp.set_defaults(func=_cmd_reproduce)
+    for name, help_text, func, options in COMMANDS:
+        p = sub.add_parser(name, help=help_text)
+        params_arguments(p)
+        for flags, kw in options:
+            p.add_argument(*flags, **kw)
+        _backend_args(p)
+        p.set_defaults(func=func)
 
 
 __all__ = ["add_parser", "progress_factory"]

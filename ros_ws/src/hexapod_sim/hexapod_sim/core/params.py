@@ -84,23 +84,25 @@ class RobotParams:
 
 
 @dataclass(frozen=True)
-class BodyParams:
-    """Spring-dashpots between body segments (model.md "Body compliance")."""
+class SpringDashpot:
+    """Linear spring-dashpots along x and y (the body's and the ground's)."""
 
-    k_x: float = _f("body stiffness K_x (N/m)", 0.0, 1e12)
-    k_y: float = _f("body stiffness K_y (N/m)", 0.0, 1e12)
-    b_x: float = _f("body damping B_x (N s/m)", 0.0, 1e12)
-    b_y: float = _f("body damping B_y (N s/m)", 0.0, 1e12)
+    k_x: float = _f("stiffness K_x (N/m)", 0.0, 1e12)
+    k_y: float = _f("stiffness K_y (N/m)", 0.0, 1e12)
+    b_x: float = _f("damping B_x (N s/m)", 0.0, 1e12)
+    b_y: float = _f("damping B_y (N s/m)", 0.0, 1e12)
 
 
 @dataclass(frozen=True)
-class GroundParams:
-    """Foot-ground spring-dashpot (model.md "Ground contact"); effective values: base x scale."""
+class BodyParams(SpringDashpot):
+    """Spring-dashpots between body segments (model.md "Body compliance")."""
 
-    k_x: float = _f("ground stiffness K_x at 100 % (N/m)", 0.0, 1e12)
-    k_y: float = _f("ground stiffness K_y at 100 % (N/m)", 0.0, 1e12)
-    b_x: float = _f("ground damping B_x at 100 % (N s/m)", 0.0, 1e12)
-    b_y: float = _f("ground damping B_y at 100 % (N s/m)", 0.0, 1e12)
+
+@dataclass(frozen=True)
+class GroundParams(SpringDashpot):
+    """Foot-ground spring-dashpot (model.md "Ground contact") at 100 %; effective values:
+    base x scale."""
+
     scale: float = _f("factor on all four ground parameters (1.0 = 100 %, the sweep variable)",
                       0.0, 1e6, lo_open=True)
     friction_mu: float = _f("Coulomb limit |F_x| <= mu F_y; 0 disables it (paper: none)",
