@@ -49,7 +49,16 @@ NAMES = [f'leg{i}_{j}' for i in range(1, 7) for j in ('hip', 'knee')]
 
 
 def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
+    """This process's peak resident set (MB): VmHWM, which starts afresh at exec (Linux keeps
+    ru_maxrss across exec, so a child would report its parent's peak)."""
+    try:
+        with open('/proc/self/status') as fh:
+            for line in fh:
+                if line.startswith('VmHWM:'):
+                    return int(line.split()[1]) / 1024  # KiB
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB
 
 
 def write_bag(path: Path, n: int, compression: str) -> float:

@@ -56,7 +56,7 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
     """(switch ticks, lost ticks per switch) from a bag of the graph; with ``at``, the same
     count around those ticks instead (the baseline of a run without switches)."""
     from hexapod_metrics.bag import open_bag
-    from hexapod_sim import conversions as C
+    from hexapod_sim.runtime import conversions as C
     from hexapod_sim.core import topics as T
     from hexapod_sim.core.labels import in_charge
 

@@ -42,7 +42,7 @@ class Client:
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from hexapod_sim import conversions as C
+        from hexapod_sim.runtime import conversions as C
 
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)

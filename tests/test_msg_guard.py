@@ -141,9 +141,9 @@ def test_finite_check():
 
 def test_guard_decoding_of_malformed_joint_states():
     pytest.importorskip("rclpy", reason="the guard lives on the node side (scripts/setup.sh)")
-    from hexapod_sim import conversions as C
+    from hexapod_sim.runtime import conversions as C
     from hexapod_sim.core import topics as T
-    from hexapod_sim.input_guard import _decode
+    from hexapod_sim.runtime.input_guard import _decode
 
     codec = C.CODECS[T.JOINT_COMMANDS]
     good = codec.encode(5_000_000, "pd_pf", np.zeros(12), np.zeros(12), np.ones(12))

@@ -81,6 +81,31 @@ PARAMS_FILES = [  # (file content, text the one line must hold)
      "parameter 'gait.step_length' = 4.0 is invalid"),
     (BASE.replace("foot_clearance: 0.2", "foot_clearance: 1.8"),
      "parameter 'gait.foot_clearance' = 1.8 is invalid"),
+    # the nodes' own parameters: their table (params.NODE_PARAMS) holds type and range
+    ("markers:\n  ros__parameters:\n    rate: 0\n",
+     "node 'markers': parameter 'rate' = 0.0 is invalid: allowed float in (0, 1e+06]"),
+    ("markers:\n  ros__parameters:\n    deliver_to: 5\n",
+     "node 'markers': parameter 'deliver_to' = 5 is invalid: allowed any str"),
+    ("markers:\n  ros__parameters:\n    startup_timeout: .nan\n",
+     "node 'markers': parameter 'startup_timeout' = nan is invalid"),
+    ("/**:\n  ros__parameters:\n    startup_timeout: -1\n",
+     "node 'hexapod_sim': parameter 'startup_timeout' = -1.0 is invalid: allowed float in [0, "),
+    ("markers:\n  ros__parameters:\n    lookahead: 2\n",
+     "'lookahead' is not a parameter of node 'markers'"),
+    ("metrics:\n  ros__parameters:\n    max_bag_size: -1\n",
+     "node 'metrics': parameter 'max_bag_size' = -1 is invalid: allowed int in [0, "),
+    ("metrics:\n  ros__parameters:\n    batch_interval: fast\n",
+     "node 'metrics': parameter 'batch_interval' = 'fast' is invalid"),
+    ("foxglove_bridge:\n  ros__parameters:\n    port: 70000\n",
+     "node 'foxglove_bridge': parameter 'port' = 70000 is invalid: allowed int in [0, 65535]"),
+    ("hexapod_sim:\n  ros__parameters:\n    switch_to: pd_x\n",
+     "node 'hexapod_sim': parameter 'switch_to' = 'pd_x' is invalid: allowed one of '', pd_p, "
+     "pd_pf"),
+    ("pd_p_controller:\n  ros__parameters:\n    autostart: 1\n",
+     "node 'pd_p_controller': parameter 'autostart' = 1 is invalid: allowed true or false"),
+    ("trajectory_generator:\n  ros__parameters:\n    lookahead: 1.5\n",
+     "node 'trajectory_generator': parameter 'lookahead' = 1.5 is invalid: allowed int in "
+     "[0, 1000]"),
 ]
 
 

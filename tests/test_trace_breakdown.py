@@ -20,6 +20,17 @@ PLANTED = [50, 150, 50, 50, 100, 100, 100, 100, 200, 100, 100, 100, 100, 100, 10
 PLANTED.append(PERIOD - sum(PLANTED))
 
 
+def _reception(topic, s, t, marks, dds):
+    """Take, taken (with the DDS source and reception stamps), verified, decoded, checked
+    of one message of ``topic`` stamped ``s``, at wall offsets ``marks`` from ``t``."""
+    take0, take1, verified, decoded, checked = (t + m for m in marks)
+    return [(tr.TAKE0, ID[topic], s, take0, 0, 0),
+            (tr.TAKE1, ID[topic], s, take1, t + dds[0], t + dds[1]),
+            (tr.VERIFIED, ID[topic], s, verified, 0, 0),
+            (tr.DECODED, ID[topic], s, decoded, 0, 0),
+            (tr.CHECKED, ID[topic], s, checked, 0, 0)]
+
+
 def _traces():
     sim, ctrl, idle = [], [], []
     for k in range(N):
@@ -28,22 +39,14 @@ def _traces():
         sim += [(tr.PUB0, 0, s, t + c[0], 0, 0), (tr.PUB1, ID[T.FOOT_FORCES], s, t + 20, 0, 0),
                 (tr.PUB1, ID[T.JOINT_STATES], s, t + c[1] + 10, 0, 0)]
         ctrl += [(tr.WAKE, 0, -1, t + c[3], 300_000 * k, 400_000 * k),
-                 (tr.TAKE0, ID[T.JOINT_STATES], s, t + c[4], 0, 0),
-                 (tr.TAKE1, ID[T.JOINT_STATES], s, t + c[5], t + c[1], t + c[2]),
-                 (tr.VERIFIED, ID[T.JOINT_STATES], s, t + c[6], 0, 0),
-                 (tr.DECODED, ID[T.JOINT_STATES], s, t + c[7], 0, 0),
-                 (tr.CHECKED, ID[T.JOINT_STATES], s, t + c[8], 0, 0),
+                 *_reception(T.JOINT_STATES, s, t, c[4:9], c[1:3]),
                  (tr.LAW0, 0, s, t + c[9], 0, 0), (tr.LAW1, 0, s, t + c[10], 0, 0),
                  (tr.SIGN0, ID[T.JOINT_COMMANDS], s, t + c[11], 0, 0),
                  (tr.SIGN1, ID[T.JOINT_COMMANDS], -1, t + c[11] + 40, 0, 0),
                  (tr.PUB0, ID[T.JOINT_COMMANDS], s, t + c[12], 0, 0)]
         idle.append((tr.WAKE, 0, -1, t + 5, 100_000 * k, 150_000 * k))
         sim += [(tr.WAKE, 0, -1, t + c[15], 500_000 * k, 700_000 * k),
-                (tr.TAKE0, ID[T.JOINT_COMMANDS], s, t + c[16], 0, 0),
-                (tr.TAKE1, ID[T.JOINT_COMMANDS], s, t + c[17], t + c[13], t + c[14]),
-                (tr.VERIFIED, ID[T.JOINT_COMMANDS], s, t + c[18], 0, 0),
-                (tr.DECODED, ID[T.JOINT_COMMANDS], s, t + c[19], 0, 0),
-                (tr.CHECKED, ID[T.JOINT_COMMANDS], s, t + c[20], 0, 0),
+                *_reception(T.JOINT_COMMANDS, s, t, c[16:21], c[13:15]),
                 (tr.STEP0, 0, s, t + c[21], 0, 0), (tr.STEP1, 0, s, t + c[22], 0, 0),
                 (tr.PREP0, 0, -1, t + c[23], 0, 0)]
         # the next tick's three state messages: encode 200 ns in all, sign 150 ns in all

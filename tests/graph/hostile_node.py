@@ -40,7 +40,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.msg_auth import TRAILER_BYTES, Signer, run_key

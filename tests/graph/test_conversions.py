@@ -1,4 +1,4 @@
-"""Messages <-> arrays (hexapod_sim.conversions) and the parameters' ROS side (ros_params)."""
+"""Messages <-> arrays (hexapod_sim.runtime.conversions) and the ROS side of parameters."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import SPECS
 
@@ -68,7 +68,7 @@ def test_fill_obs_is_the_inverse_of_state_columns():
 
 
 def test_descriptors_come_from_the_specs():
-    from hexapod_sim.ros_params import descriptor, is_live
+    from hexapod_sim.runtime.ros_params import descriptor, is_live
 
     assert descriptor("robot.leg_length_1", SPECS["robot.leg_length_1"]).read_only
     assert descriptor("sim.dt", SPECS["sim.dt"]).read_only
@@ -90,7 +90,7 @@ def test_inf_in_a_params_file_reaches_the_node(tmp_path):
     import rclpy
     from rclpy.context import Context
 
-    from hexapod_sim.ros_params import declare_params
+    from hexapod_sim.runtime.ros_params import declare_params
 
     path = tmp_path / "p.yaml"
     path.write_text("/**:\n  ros__parameters:\n    actuator:\n      t_max: .inf\n")

@@ -385,3 +385,25 @@ def test_node_started_by_hand_refuses_a_misspelt_params_file(make_graph, tmp_pat
     log = g.log(node)
     assert message in log and "Traceback" not in log
     assert len([line for line in log.splitlines() if "ERROR" in line]) == 1
+
+
+@pytest.mark.parametrize("node, arg, message", [
+    ("markers", "rate:=0.0", "parameter 'rate' = 0.0 is invalid: allowed float in (0, 1e+06]"),
+    ("markers", "deliver_to:=5", "parameter 'deliver_to' = 5 is invalid: allowed any str"),
+    ("markers", "startup_timeout:=-1.0", "parameter 'startup_timeout' = -1.0 is invalid"),
+    ("metrics", "reorder_window:=-0.5", "parameter 'reorder_window' = -0.5 is invalid"),
+    ("trajectory_generator", "lookahead:=-2", "parameter 'lookahead' = -2 is invalid"),
+    ("hexapod_sim", "switch_to:=pd_x", "parameter 'switch_to' = 'pd_x' is invalid"),
+    ("foxglove_bridge", "port:=70000", "parameter 'port' = 70000 is invalid"),
+])
+def test_node_started_by_hand_refuses_a_bad_node_parameter(make_graph, tmp_path, node, arg,
+                                                           message):
+    """`ros2 run <pkg> <node> --ros-args -p name:=value` with a value outside the node's
+    table: one ERROR line naming it, exit 2, no traceback."""
+    g = make_graph()
+    extra = [f"bag_path:={tmp_path / 'bag'}"] if node == "metrics" else []
+    g.start(node, arg, *extra)
+    assert g.wait_exit(node, 120) == 2
+    log = g.log(node)
+    assert message in log and "Traceback" not in log, log
+    assert len([line for line in log.splitlines() if "ERROR" in line]) == 1, log

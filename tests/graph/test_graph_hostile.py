@@ -28,7 +28,7 @@ from hexapod_control.core.closed_loop import run
 from hexapod_control.core.controllers import control_law, controller_code, gain_vector
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_metrics.core.bag_params import bag_params
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core import topics as T
 

@@ -63,7 +63,7 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.serialization import serialize_message
 
-        from hexapod_sim import conversions as C
+        from hexapod_sim.runtime import conversions as C
         from hexapod_sim.core.msg_auth import Signer, read_key_file
         from hexapod_sim.core.param_log import ParamRecord
 

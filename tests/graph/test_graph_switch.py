@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hexapod_metrics.bag import open_bag
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import in_charge
 

@@ -19,7 +19,7 @@ T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exact
 architecture's name. References and foot forces queue in their subscriptions without
 waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken at every state, so a
 controller that is not in charge costs one wake-up per tick and is ready to take over at
-any tick boundary. Every input goes through the guard (``hexapod_sim.input_guard``) and
+any tick boundary. Every input goes through the guard (``hexapod_sim.runtime.input_guard``) and
 every command is signed with the run's key.
 """
 from __future__ import annotations
@@ -33,17 +33,17 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core import trace as _trace
 from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.hot_loop import FastLogger, HotLoop
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.node_main import run_node
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_sim.runtime.input_guard import InputGuard
+from hexapod_sim.runtime.node_main import run_node
+from hexapod_sim.runtime.param_topic import ParamAnnouncer
+from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 
 from .core.controllers import control_law, controller_code, gain_vector
 
@@ -63,8 +63,7 @@ class ControllerNode(LifecycleNode):
         # msg_checks.AHEAD_S ahead of the last; references and forces within AHEAD_S of it.
         self.window = M.StampWindow(increasing=True)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
-        self.autostart = declare_node_param(self, "autostart", True,
-                                            "configure and activate at start")
+        self.autostart = declare_node_param(self, "autostart")
         # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
         # /hexapod/status, so the bag records it with the sim time it happened at.
         self.lifecycle = "unconfigured"

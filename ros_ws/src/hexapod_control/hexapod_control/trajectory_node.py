@@ -8,7 +8,7 @@ stamped with the time it is for; its columns are
 (paper eqs. 1-4). References are computed a block of ticks at a time, at the same instants
 ``k * control period`` as the in-process loop, so the numbers are identical to it.
 
-The publisher is transient-local (see hexapod_sim.conversions.TOPIC_QOS): a controller or
+The publisher is transient-local (see hexapod_sim.runtime.conversions.TOPIC_QOS): a controller or
 recorder that matches late still receives the recent references.
 """
 from __future__ import annotations
@@ -18,18 +18,17 @@ import sys
 import numpy as np
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core import topics as T
-from hexapod_sim.core.errors import ParameterError
 from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.hot_loop import FastLogger, HotLoop
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.node_main import run_node
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_sim.runtime.input_guard import InputGuard
+from hexapod_sim.runtime.node_main import run_node
+from hexapod_sim.runtime.param_topic import ParamAnnouncer
+from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
 MAX_GAP = 10000  # ticks of missed clock messages filled in at most
@@ -46,10 +45,7 @@ class TrajectoryNode(Node):
         # back (a new run), not leap ahead.
         self.window = M.StampWindow()
         self.binding = ParamBinding(self, declare_params(self))
-        self.lookahead = declare_node_param(self, "lookahead", 1,
-                                            "ticks published ahead of the clock")
-        if self.lookahead < 0:
-            raise ParameterError("lookahead", self.lookahead, "an int >= 0")
+        self.lookahead = declare_node_param(self, "lookahead")
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))

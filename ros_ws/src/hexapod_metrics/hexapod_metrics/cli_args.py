@@ -156,12 +156,13 @@ def params_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override any parameter by its dotted name, e.g. gait.velocity=0.8")
 
 
-def params_from_args(args: argparse.Namespace) -> HexapodParams:
-    """Load the params file and apply --t-max, --ground-scale and --set overrides."""
+def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
+    """Dotted parameter name -> value from --set, --t-max, --ground-scale and
+    --control-rate (the CLI's and the graph launcher's one reading of them)."""
     overrides: dict[str, Any] = {}
     for item in args.set:
         name, sep, text = item.partition("=")
-        if not sep:
+        if not sep or not name.strip():
             raise HexapodError(f"--set expects NAME=VALUE, got {item!r}")
         overrides[name.strip()] = parse_value(text.strip())
     if args.t_max is not None:
@@ -173,7 +174,12 @@ def params_from_args(args: argparse.Namespace) -> HexapodParams:
             raise HexapodError(f"--control-rate: expected a positive number of Hz, got "
                                f"{args.control_rate:g}")
         overrides["sim.control_period"] = 1.0 / args.control_rate
-    return load_params(args.params, **overrides)
+    return overrides
+
+
+def params_from_args(args: argparse.Namespace) -> HexapodParams:
+    """Load the params file and apply --t-max, --ground-scale and --set overrides."""
+    return load_params(args.params, **overrides_from_args(args))
 
 
 def parse_value(text: str) -> Any:
@@ -184,5 +190,6 @@ def parse_value(text: str) -> Any:
         return text
 
 
-__all__ = ["OneLineParser", "control_rate", "number", "param_value", "params_arguments",
+__all__ = ["OneLineParser", "control_rate", "number", "overrides_from_args", "param_value",
+           "params_arguments",
            "params_from_args", "parse_range", "parse_value", "read_number", "value_range"]

@@ -32,8 +32,8 @@ from typing import IO, Any, Callable, Sequence
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.dds_profile import private_profile
-from hexapod_sim.lifeline import PARENT_ENV
+from hexapod_sim.runtime.dds_profile import private_profile
+from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import number
 
@@ -114,7 +114,7 @@ class GraphProcesses:
         nice = NICE.get(node, 0) if nice is None else nice
         args = list(prefix) + (["nice", "-n", str(nice)] if nice else [])
         args += [sys.executable, "-c",
-                 "import sys; from hexapod_sim.lifeline import die_with_parent; "
+                 "import sys; from hexapod_sim.runtime.lifeline import die_with_parent; "
                  f"die_with_parent(); from {module} import {func}; sys.exit({func}())",
                  "--ros-args"]
         if self.params:
@@ -314,7 +314,7 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
     """Nodes seen in the graph and the values of one /hexapod/status (None if none came)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from hexapod_sim.conversions import statuses
+    from hexapod_sim.runtime.conversions import statuses
     from hexapod_sim.core.topics import STATUS
 
     node = _ros_node("hexapod_status")

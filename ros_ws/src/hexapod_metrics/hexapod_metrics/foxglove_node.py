@@ -19,16 +19,16 @@ import sys
 from typing import Any
 
 from hexapod_sim.core import topics as T
-from hexapod_sim.core.errors import HexapodError, ParameterError
+from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.topics import TOPICS
-from hexapod_sim.hot_loop import FastLogger, HotLoop
-from hexapod_sim.input_guard import SIGNED_TOPICS, InputGuard
-from hexapod_sim.node_main import run_node
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import declare_node_param
+from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_sim.runtime.input_guard import SIGNED_TOPICS, InputGuard
+from hexapod_sim.runtime.node_main import run_node
+from hexapod_sim.runtime.param_topic import ParamAnnouncer
+from hexapod_sim.runtime.ros_params import declare_node_param
 from rclpy.node import Node
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 
 from .bag.msgdefs import lookup
 
@@ -54,12 +54,9 @@ class FoxgloveBridge(Node):
         import foxglove
 
         self.log = FastLogger(self.get_logger().name)
-        host = declare_node_param(self, "host", "127.0.0.1", "address to listen on")
-        port = declare_node_param(self, "port", 8765, "WebSocket port (0 = any free one)")
-        if not 0 <= port <= 65535:
-            raise ParameterError("port", port, "an int in [0, 65535]")
-        batch = declare_node_param(self, "batch_interval", 0.01,
-                                   "s between two takes of the queued messages")
+        host = declare_node_param(self, "host")
+        port = declare_node_param(self, "port")
+        batch = declare_node_param(self, "batch_interval")
         try:
             self.server = foxglove.start_server(
                 name="hexapod", host=host, port=port,

@@ -40,7 +40,7 @@ from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                      default_params_path, load_params, read_params_file)
 
-from .cli_args import OneLineParser, control_rate, number, param_value
+from .cli_args import OneLineParser, control_rate, number, overrides_from_args, param_value
 from .cmd_graph import GraphProcesses
 
 #: Exit codes of the launcher, one per cause (the first that applies, in this order).
@@ -179,27 +179,13 @@ def settings(args: argparse.Namespace) -> tuple[HexapodParams, dict[str, Any]]:
 
     Raises ParameterError / ParamsFileError (one line, named key) exactly as the CLI does.
     """
-    from .cli_args import parse_value
-
-    overrides: dict[str, Any] = {}
-    for item in args.set:
-        name, sep, text = item.partition("=")
-        if not sep or not name.strip():
-            raise LaunchError(f"--set expects NAME=VALUE, got {item!r}")
-        overrides[name.strip()] = parse_value(text.strip())
+    overrides = overrides_from_args(args)
     overrides["run.controller"] = args.controller
     overrides["sim.mode"] = args.mode
     if args.duration > 0:
         overrides["run.duration"] = args.duration
-    if args.t_max is not None:
-        overrides["actuator.t_max"] = args.t_max
-    if args.ground_scale is not None:
-        overrides["ground.scale"] = args.ground_scale
-    rate = args.control_rate
-    if rate is None and args.params is None and "sim.control_period" not in overrides:
-        rate = GRAPH_RATE_HZ
-    if rate is not None:
-        overrides["sim.control_period"] = 1.0 / rate
+    if args.params is None and "sim.control_period" not in overrides:
+        overrides["sim.control_period"] = 1.0 / GRAPH_RATE_HZ
     path = args.params or default_params_path()
     p = load_params(path, **overrides)
     node_params = {k: v for k, v in read_params_file(path).items() if k not in SPECS}

@@ -18,17 +18,17 @@ from builtin_interfaces.msg import Duration as DurationMsg
 from geometry_msgs.msg import Point
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import OBS_SHAPE
-from hexapod_sim.hot_loop import HotLoop
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.node_main import run_node
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import declare_node_param, declare_params
+from hexapod_sim.runtime.hot_loop import HotLoop
+from hexapod_sim.runtime.input_guard import InputGuard
+from hexapod_sim.runtime.node_main import run_node
+from hexapod_sim.runtime.param_topic import ParamAnnouncer
+from hexapod_sim.runtime.ros_params import declare_node_param, declare_params
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 
 from .core.figure import FORCE_SCALE, side, stick_figure
 
@@ -94,7 +94,7 @@ class MarkerNode(Node):
     def __init__(self) -> None:
         super().__init__("markers")
         p = declare_params(self)  # the shared params file (--ros-args --params-file)
-        rate = declare_node_param(self, "rate", 30.0, "markers per simulated second (Hz)")
+        rate = declare_node_param(self, "rate")
         self.l1 = p.robot.leg_length_1
         self.period_ns = int(round(p.sim.control_period * 1e9))
         self.stride = max(1, int(round(1.0 / (rate * p.sim.control_period))))
@@ -104,11 +104,8 @@ class MarkerNode(Node):
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
         self.signer = self.guard.signer(T.MARKERS)
-        deliver_to = declare_node_param(
-            self, "deliver_to", "metrics",
-            "comma-separated nodes that must receive the markers from t = 0 ('' = none)")
-        timeout = declare_node_param(self, "startup_timeout", 60.0,
-                                     "wall s to wait for deliver_to, then start anyway")
+        deliver_to = declare_node_param(self, "deliver_to")
+        timeout = declare_node_param(self, "startup_timeout")
         # The sim's tick 0 waits for this node's state subscriptions; they are made only once
         # the recorder's subscription is matched, or the first markers are published to
         # nobody (a volatile writer does not keep them for a reader it matches later).

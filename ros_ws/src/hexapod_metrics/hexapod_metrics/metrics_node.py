@@ -1,45 +1,17 @@
 """Node ``metrics``: records every topic of the contract to a bag and scores each gait cycle.
 
-Recording: every topic is subscribed raw (serialized bytes) with reliable QoS and deep
-queues; each message is authenticated and checked (``hexapod_sim.input_guard``: a dropped
-one is counted and reported, never recorded) and its payload, without the tag, written as
-it comes to a rosbag2/MCAP bag
-(:class:`~hexapod_metrics.bag.BagWriter`) at ``bag_path`` (default
-``bags/<YYYYmmdd-HHMMSS>``), with each topic's offered QoS
-(:data:`hexapod_sim.conversions.TOPIC_QOS`; ``/hexapod/active_controller`` is
-transient-local). Parameters: every node's records from ``/hexapod/parameters`` (start
-values, and each runtime change with its tick) go into the MCAP as checksummed Metadata
-records and into ``metadata.yaml``'s ``custom_data`` (core/recording.py
-``ParamRecorder``); undecodable ones are dropped, counted and logged. The log time of every
-message is its own simulated time (:mod:`~hexapod_metrics.core.log_times`): the header
-stamp, a MarkerArray's first marker stamp, and for ``/hexapod/active_controller`` the tick
-the switch took effect (the first joint_states naming that controller). Chunks are cut at
-a watermark over the tick topics (:data:`TICK_TOPICS`, less ``reorder_window`` s of sim
-time), so every chunk covers the same ticks of every tick topic, in log-time order, and
-every chunk leaves a complete, indexed MCAP behind it. Every message is authenticated and
-checked first (``hexapod_sim.input_guard``: a dropped one is counted and reported, never
-recorded) and its payload recorded without the tag; ``/clock`` (which carries no tag) is
-not subscribed: the clock of each tick is written from the authenticated joint states
-(the same bytes the sim sends). The node takes its messages in
-batches (``batch_interval``, default 5 ms) so that it does not compete with the control
-loop for the CPU; the queues (10000 messages per topic) cover seconds of lag. SIGINT and
-SIGTERM stop the node cleanly: the messages already received are taken and written, the
-bag is closed (summary and ``metadata.yaml``) and ``indices.json`` is written. After a
-SIGKILL the bag stays indexed and readable up to its last chunk (the reorder window plus
-at most one chunk, ~1 s of sim time, is lost) and says it was not closed.
-
-A write that fails (disk full, quota, I/O error) stops the recording: the bag is closed at
-its last complete chunk (readable everywhere), an ERROR status named ``metrics`` with the
-reason goes out on ``/hexapod/status``, and the node exits with code
-:data:`EXIT_RECORDING_FAILED` (3). Other exit codes: 0 clean, 1 other error, 2 bad
-parameters.
-
-Indices: the one cycle scorer (:mod:`~hexapod_metrics.core.cycles`) scores each gait cycle;
-each is published on ``/hexapod/indices`` and written to the bag, labelled with the controller
-only if it commanded every torque of the cycle (``hexapod_sim.core.labels``: else
-``mixed(...)``, ``held`` or ``fallback``; ``a->b`` across a switch). At close,
-``indices.json`` in the bag directory lists every cycle and, per controller segment, the
-cycles it fully commanded and the last of them: the figure the paper reports.
+Every topic is taken raw, authenticated and checked (``hexapod_sim.runtime.input_guard``: a
+dropped message is counted and reported, never recorded) and its payload written to a
+rosbag2/MCAP bag (:class:`~hexapod_metrics.bag.BagWriter`) at ``bag_path`` with the topic
+table's QoS; ``/clock`` is written from the authenticated joint states. Log time = the
+message's own sim time (:mod:`~hexapod_metrics.core.log_times`); chunks are cut at a
+watermark over the tick topics, so a SIGKILL leaves an indexed bag whose topics all end at
+the same tick. Parameters (start values and runtime changes, from ``/hexapod/parameters``)
+go into the MCAP as checksummed metadata (``core/recording.py``). A failed write (full
+disk) closes the bag at its last chunk, reports ERROR on ``/hexapod/status`` and exits
+with :data:`EXIT_RECORDING_FAILED` (3); 0 clean, 1 other error, 2 bad parameters. Each gait
+cycle is scored by :mod:`~hexapod_metrics.core.cycles`, published on ``/hexapod/indices``
+with its label (``hexapod_sim.core.labels``) and listed in ``indices.json`` at close.
 """
 from __future__ import annotations
 
@@ -56,16 +28,16 @@ from hexapod_sim.core.labels import in_charge
 from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
 from hexapod_sim.core.params import CONTROLLERS
 from hexapod_sim.core.topics import TICK_TOPICS, TOPICS
-from hexapod_sim.hot_loop import FastLogger, HotLoop
-from hexapod_sim.input_guard import InputGuard
-from hexapod_sim.node_main import run_node
-from hexapod_sim.param_topic import ParamAnnouncer
-from hexapod_sim.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_sim.runtime.input_guard import InputGuard
+from hexapod_sim.runtime.node_main import run_node
+from hexapod_sim.runtime.param_topic import ParamAnnouncer
+from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
-from hexapod_sim import conversions as C
+from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import cdr
 from hexapod_sim.core.errors import CdrError
 
@@ -93,16 +65,11 @@ class MetricsNode(Node):
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
-        self.bag_path = Path(declare_node_param(self, "bag_path", default,
-                                                "bag directory (must not exist)") or default)
-        batch = declare_node_param(self, "batch_interval", 0.005,
-                                   "s between two takes of the queued messages")
-        window = declare_node_param(self, "reorder_window", 0.5,
-                                    "sim s a chunk waits for late messages behind the ticks")
-        max_size = declare_node_param(self, "max_bag_size", 0,
-                                      "bytes per MCAP file before a new one starts (0: one file)")
-        max_duration = declare_node_param(self, "max_bag_duration", 0.0,
-                                          "sim s per MCAP file before a new one starts (0: one)")
+        self.bag_path = Path(declare_node_param(self, "bag_path") or default)
+        batch = declare_node_param(self, "batch_interval")
+        window = declare_node_param(self, "reorder_window")
+        max_size = declare_node_param(self, "max_bag_size")
+        max_duration = declare_node_param(self, "max_bag_duration")
         self.period = p.sim.control_period
         # The recorder takes its queues topic by topic and may lag by seconds: a cycle waits
         # for its slowest topic (as offline), and is given up only if a topic stays 10 cycles

@@ -28,7 +28,7 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from . import conversions as C
+from .runtime import conversions as C
 from .core import msg_checks as M
 from .core import topics as T
 from .core.actuator import saturate
@@ -38,11 +38,11 @@ from .core.params import N_LEGS, HexapodParams, check_controller
 from .core.switch_channel import ChannelError, SwitchServer
 from .core import trace as _trace
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
-from .hot_loop import FastLogger, HotLoop
-from .input_guard import InputGuard
-from .node_main import run_node
-from .param_topic import ParamAnnouncer
-from .ros_params import ParamBinding, declare_node_param, declare_params
+from .runtime.hot_loop import FastLogger, HotLoop
+from .runtime.input_guard import InputGuard
+from .runtime.node_main import run_node
+from .runtime.param_topic import ParamAnnouncer
+from .runtime.ros_params import ParamBinding, declare_node_param, declare_params
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -54,7 +54,6 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     # the markers node draws every state from t = 0: tick 0 waits for its subscriptions too
     "markers": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES), ()),
 }
-DEFAULT_WAIT_FOR = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 
 
@@ -67,29 +66,22 @@ class SimNode(Node):
         self.guard = InputGuard(self, self.log)  # authenticates and checks every input
         self.binding = ParamBinding(self, declare_params(self), self._on_params,
                                     check=self._check_change)
-        self.stop_at_end = declare_node_param(
-            self, "stop_at_end", False, "stop (and exit) after the tick at run.duration")
-        wait_for = declare_node_param(
-            self, "wait_for", DEFAULT_WAIT_FOR,
-            "comma-separated nodes whose endpoints must be matched before tick 0 ('' = none)")
+        self.stop_at_end = declare_node_param(self, "stop_at_end")
+        wait_for = declare_node_param(self, "wait_for")
         self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
-        self.startup_timeout = declare_node_param(
-            self, "startup_timeout", 60.0, "wall s to wait for wait_for, then start anyway")
+        self.startup_timeout = declare_node_param(self, "startup_timeout")
         # A scripted switch (scripts/run_graph.sh): at the first tick at or after switch_at
         # (sim s), the sim sets its own run.controller to switch_to, exactly as a
         # `hexapod switch` would; deterministic, so the run can be reproduced.
-        self.switch_at = declare_node_param(self, "switch_at", -1.0,
-                                            "simulated s of a scripted switch")
-        self.switch_to = declare_node_param(self, "switch_to", "",
-                                            "controller of the scripted switch ('' = none)")
+        self.switch_at = declare_node_param(self, "switch_at")
+        self.switch_to = declare_node_param(self, "switch_to")
         if self.switch_to:
             check_controller(self.switch_to)
         end = self.params.run.duration if self.stop_at_end else float("inf")
         if self.switch_to and not (0.0 <= self.switch_at <= end):
             raise ParameterError("switch_at", self.switch_at,
                                  f"a time in [0, run.duration = {end:g}] s")
-        self.summary_path = declare_node_param(
-            self, "summary_path", "", "write the end summary as JSON to this file ('' = no)")
+        self.summary_path = declare_node_param(self, "summary_path")
         p = self.params
         self.mode = p.sim.mode
         self.period = p.sim.control_period

@@ -104,17 +104,9 @@ class BagAnalysis:
     """(time s, node, name, value) of every recorded parameter change, applied there."""
 
 
-def controller_changes(bag: Bag, dt_ns: int,
-                       online: list[tuple[int, str, Indices]] | None = None
-                       ) -> list[tuple[int, str]]:
+def controller_changes(bag: Bag, dt_ns: int) -> list[tuple[int, str]]:
     """(first tick, controller in charge) at the start and at every change of it (the
-    controller named by joint_states' frame_id, ``hexapod_sim.core.labels``).
-
-    If ``online`` is given, the bag's /hexapod/indices records are appended to it as
-    (cycle, controller, indices).
-    """
-    if online is not None:
-        online.extend(online_indices(bag))
+    controller named by joint_states' frame_id, ``hexapod_sim.core.labels``)."""
     frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
     for _ in iter_joint_state_blocks(bag, [T.JOINT_STATES], frames=frames):
         pass
@@ -131,13 +123,6 @@ def ticks_of_changes(frames: list[tuple[int, str]], dt_ns: int,
         if not out or out[-1][1] != who:
             out.append((int(round(stamp / dt_ns)), who))
     return out
-
-
-def online_indices(bag: Bag) -> list[tuple[int, str, Indices]]:
-    """The per-cycle indices the recorder published (/hexapod/indices), in file order."""
-    if T.INDICES not in bag.topics:
-        return []
-    return [r for _, _, raw in bag.messages([T.INDICES]) for r in _online_records(raw)]
 
 
 def label_ticks(changes: list[tuple[int, str]], ticks: npt.ArrayLike) -> np.ndarray:
@@ -265,7 +250,6 @@ __all__ = [
     "analyze_bag",
     "controller_changes",
     "label_ticks",
-    "online_indices",
     "ticks_of_changes",
     "with_param_boundaries",
 ]

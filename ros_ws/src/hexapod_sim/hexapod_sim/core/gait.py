@@ -7,12 +7,15 @@ velocities in m/s, angles in rad.
 [resolution, model.md] The paper's eq. (1a) advances the foot by V_F t_T per transfer,
 which contradicts eq. (2); here the foot advances one stride L_S = V_F T.
 
-This module lives with the model (not in hexapod_control as first sketched) because
-parameter validation needs it to reject unreachable gaits.
+This module lives with the model (not in hexapod_control as first sketched): parameter
+validation needs it to reject unreachable gaits, the engine starts every run at the gait's
+pose at t = 0, and the indices measure errors against it. It imports nothing of
+``params``: its functions take any :class:`GaitModel` (``HexapodParams`` is one), so
+``params`` can use it without an import cycle.
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from numba import njit
@@ -20,8 +23,19 @@ from numba import njit
 from .errors import UnreachableTargetError
 from .kinematics import N_LEGS, ik_scalar, joint_rates
 
-if TYPE_CHECKING:  # for the annotations only: params imports this module (validation)
-    from .params import HexapodParams
+
+class GaitModel(Protocol):
+    """What the gait reads of the parameters (``HexapodParams`` is one): ``gait.velocity``
+    (m/s), ``gait.step_length``, ``gait.foot_clearance``, ``gait.body_height`` (m),
+    ``gait.duty_factor``; ``robot.leg_length_1``, ``robot.leg_length_2``,
+    ``robot.stroke_pitch``, ``robot.foot_offset`` (m); ``cycle_time`` (s)."""
+
+    @property
+    def gait(self) -> Any: ...
+    @property
+    def robot(self) -> Any: ...
+    @property
+    def cycle_time(self) -> float: ...
 
 
 class Reference(NamedTuple):
@@ -47,9 +61,9 @@ def phases(beta: float) -> np.ndarray:
     return phi
 
 
-def hip_offsets(p: HexapodParams) -> np.ndarray:
+def hip_offsets(p: GaitModel) -> np.ndarray:
     """Nominal hip x offsets x0_i = -pair * S_P (m), legs 0..5."""
-    return -(np.arange(N_LEGS) // 2) * p.robot.stroke_pitch
+    return -(np.arange(N_LEGS) // 2) * float(p.robot.stroke_pitch)
 
 
 @njit(cache=True, error_model="numpy")
@@ -102,21 +116,21 @@ def _reference_kernel(t, phi, x0, period, t_t, t_s, velocity, step_length, clear
     return -1
 
 
-def _reference_arrays(p: HexapodParams, t: np.ndarray, joints: bool
+def _reference_arrays(p: GaitModel, t: np.ndarray, joints: bool, compiled: bool = True
                       ) -> tuple[np.ndarray, np.ndarray, int]:
     g = p.gait
+    kernel: Any = _reference_kernel if compiled else _reference_kernel.py_func
     period = g.step_length / g.velocity
     out = np.empty((t.shape[0], 6, N_LEGS, 2))
     support = np.empty((t.shape[0], N_LEGS), dtype=np.bool_)
-    bad = _reference_kernel(t, phases(g.duty_factor), hip_offsets(p).astype(float), period,
-                            (1.0 - g.duty_factor) * period, g.duty_factor * period, g.velocity,
-                            g.step_length, g.foot_clearance, g.body_height,
-                            p.robot.foot_offset, p.robot.leg_length_1, p.robot.leg_length_2,
-                            joints, out, support)
+    bad = kernel(t, phases(g.duty_factor), hip_offsets(p).astype(float), period,
+                 (1.0 - g.duty_factor) * period, g.duty_factor * period, g.velocity,
+                 g.step_length, g.foot_clearance, g.body_height, p.robot.foot_offset,
+                 p.robot.leg_length_1, p.robot.leg_length_2, joints, out, support)
     return out, support, bad
 
 
-def cartesian_reference(p: HexapodParams, t: np.ndarray) -> tuple[np.ndarray, ...]:
+def cartesian_reference(p: GaitModel, t: np.ndarray) -> tuple[np.ndarray, ...]:
     """Hip and foot desired positions and velocities at times t (paper eqs. 1-3).
 
     Returns (hip, hip_vel, foot, foot_vel, support) with shapes (N, 6, 2) and (N, 6).
@@ -126,7 +140,7 @@ def cartesian_reference(p: HexapodParams, t: np.ndarray) -> tuple[np.ndarray, ..
     return out[:, 0], out[:, 1], out[:, 2], out[:, 3], support
 
 
-def reference(p: HexapodParams, t: np.ndarray | float) -> Reference:
+def reference(p: GaitModel, t: np.ndarray | float) -> Reference:
     """Full reference at times t: Cartesian (eqs. 1-3) and joint (eqs. 4a-4c).
 
     One compiled pass over all samples (the in-process loop asks for a whole run or block
@@ -146,13 +160,20 @@ def reference(p: HexapodParams, t: np.ndarray | float) -> Reference:
                      support)
 
 
-def reach_bounds(p: HexapodParams, samples: int = 2001) -> tuple[float, float]:
-    """Smallest and largest hip-foot distance |p_Hd - p_Fd| over one gait cycle (m)."""
+def reach_bounds(p: GaitModel, samples: int = 2001) -> tuple[float, float]:
+    """Smallest and largest hip-foot distance |p_Hd - p_Fd| over one gait cycle (m).
+
+    Parameter validation runs this wherever parameters are read, also in processes that
+    never run compiled code (``hexapod analyze`` reading a bag's parameters): so it runs the
+    same kernel interpreted (``py_func``, ~50 ms for 12,006 samples here) instead of loading
+    the compiled one (0.3-0.8 s in a fresh process, measured).
+    """
     t = np.linspace(0.0, p.cycle_time, samples)
-    hip, _, foot, _, _ = cartesian_reference(p, t)
+    out, _, _ = _reference_arrays(p, t, False, compiled=False)
+    hip, foot = out[:, 0], out[:, 2]
     r = np.hypot(*np.moveaxis(hip - foot, -1, 0))
     return float(r.min()), float(r.max())
 
 
-__all__ = ["Reference", "cartesian_reference", "hip_offsets", "phases", "reach_bounds",
+__all__ = ["GaitModel", "Reference", "cartesian_reference", "hip_offsets", "phases", "reach_bounds",
            "reference"]

@@ -40,11 +40,14 @@ class Spec:
     hi_open: bool = False
     choices: tuple[str, ...] = ()
     allow_inf: bool = False
+    default: Any = None  # node parameters only (model parameters: the params file)
 
     def allowed(self) -> str:
         """Human text of the allowed values, used in error messages and descriptors."""
+        if self.kind is bool:
+            return "true or false"
         if self.choices:
-            return "one of " + ", ".join(self.choices)
+            return "one of " + ", ".join(c or "''" for c in self.choices)
         if self.lo is None and self.hi is None:
             return f"any {self.kind.__name__}"
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
@@ -238,8 +241,17 @@ def check_value(name: str, value: Any) -> Any:
     spec = SPECS.get(name)
     if spec is None:
         raise unknown_parameter(name, value)
+    return check_spec(name, spec, value)
+
+
+def check_spec(name: str, spec: Spec, value: Any) -> Any:
+    """``value`` checked against ``spec`` (ParameterError naming ``name``), converted."""
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(name, value, spec.allowed())
+        return value
     if spec.kind is str:
-        if not isinstance(value, str) or value not in spec.choices:
+        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
             raise ParameterError(name, value, spec.allowed())
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -344,16 +356,56 @@ def default_params_path() -> Path:
 
 #: Parameters of the nodes themselves (not of the model), by node: a params file may set
 #: them in the node's own section or in '/**'. ``use_sim_time`` is every node's.
-NODE_PARAMS: dict[str, tuple[str, ...]] = {
-    "hexapod_sim": ("stop_at_end", "wait_for", "startup_timeout", "switch_at", "switch_to",
-                    "summary_path"),
-    "trajectory_generator": ("lookahead",),
-    "pd_p_controller": ("autostart",),
-    "pd_pf_controller": ("autostart",),
-    "metrics": ("bag_path", "batch_interval", "reorder_window", "max_bag_size",
-                "max_bag_duration"),
-    "markers": ("rate", "deliver_to", "startup_timeout"),
-    "foxglove_bridge": ("host", "port", "batch_interval"),
+def _node(kind: type, default: Any, desc: str, lo: float | None = None,
+          hi: float | None = None, *, lo_open: bool = False,
+          choices: tuple[str, ...] = ()) -> Spec:
+    return Spec(kind, desc, lo, hi, lo_open, False, choices, False, default)
+
+
+_TIMEOUT = _node(float, 60.0, "wall s to wait for the nodes named, then start anyway",
+                 0.0, 1e6)
+_BATCH = "wall s between two takes of the queued messages"
+#: Each node's own parameters (read at start, read-only on the node): type, default, range,
+#: meaning. Checked when a params file is read and when the node declares them.
+NODE_PARAMS: dict[str, dict[str, Spec]] = {
+    "hexapod_sim": {
+        "stop_at_end": _node(bool, False, "stop (and exit) after the tick at run.duration"),
+        "wait_for": _node(str, "trajectory_generator,pd_p_controller,pd_pf_controller,metrics",
+                          "comma-separated nodes whose endpoints must be matched before "
+                          "tick 0 ('' = none)"),
+        "startup_timeout": _TIMEOUT,
+        "switch_at": _node(float, -1.0, "simulated s of a scripted switch (-1 = none)",
+                           -1.0, 1e9),
+        "switch_to": _node(str, "", "controller of the scripted switch ('' = none)",
+                           choices=("",) + CONTROLLERS),
+        "summary_path": _node(str, "", "write the end summary as JSON to this file ('' = no)"),
+    },
+    "trajectory_generator": {
+        "lookahead": _node(int, 1, "ticks published ahead of the clock", 0, 1000)},
+    "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start")},
+    "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start")},
+    "metrics": {
+        "bag_path": _node(str, "", "bag directory, must not exist ('' = bags/<date-time>)"),
+        "batch_interval": _node(float, 0.005, _BATCH, 0.0, 1.0),
+        "reorder_window": _node(float, 0.5, "sim s a chunk waits for late messages behind "
+                                "the ticks", 0.0, 60.0),
+        "max_bag_size": _node(int, 0, "bytes per MCAP file before a new one starts "
+                              "(0: one file)", 0, 2**62),
+        "max_bag_duration": _node(float, 0.0, "sim s per MCAP file before a new one starts "
+                                  "(0: one file)", 0.0, 1e9),
+    },
+    "markers": {
+        "rate": _node(float, 30.0, "markers per simulated second (Hz)", 0.0, 1e6,
+                      lo_open=True),
+        "deliver_to": _node(str, "metrics", "comma-separated nodes that must receive the "
+                            "markers from t = 0 ('' = none)"),
+        "startup_timeout": _TIMEOUT,
+    },
+    "foxglove_bridge": {
+        "host": _node(str, "127.0.0.1", "address to listen on"),
+        "port": _node(int, 8765, "WebSocket port (0 = any free one)", 0, 65535),
+        "batch_interval": _node(float, 0.01, _BATCH, 0.0, 1.0),
+    },
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)
 
@@ -424,6 +476,7 @@ def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, A
             if isinstance(value, Mapping):
                 raise ParamsFileError(f"params file {path}: node parameter '{key}' must be a "
                                       f"value, got a group")
+            _check_node_value(path, section, key, value)
             out[key] = value
         elif isinstance(value, Mapping):
             raise ParamsFileError(f"params file {path}: unknown group '{key}'"
@@ -434,6 +487,24 @@ def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, A
                     else nearest(key, sorted(own) + _group_names()))
             raise ParamsFileError(f"params file {path}: unknown parameter '{key}' in section "
                                   f"'{section}'{hint}")
+
+
+def _check_node_value(path: Path, section: str, key: str, value: Any) -> None:
+    """A node parameter in a params file: known to the section's node (to some node under
+    ``/**``) and valid for every node that has it."""
+    node = section.lstrip("/")
+    owners = ([node] if section != "/**" else
+              [n for n, table in NODE_PARAMS.items() if key in table])
+    if key in COMMON_NODE_PARAMS:
+        return
+    if section != "/**" and key not in NODE_PARAMS[node]:
+        raise ParamsFileError(f"params file {path}: '{key}' is not a parameter of node "
+                              f"'{node}'" + nearest(key, NODE_PARAMS[node]))
+    for owner in owners:
+        try:
+            check_spec(key, NODE_PARAMS[owner][key], value)
+        except ParameterError as err:
+            raise ParamsFileError(f"params file {path}: node '{owner}': {err}") from None
 
 
 def read_params_file(path: str | Path) -> dict[str, Any]:
@@ -494,6 +565,6 @@ __all__ = [
     "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "GainParams",
     "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
     "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
-    "check_controller", "check_value", "default_params_path", "from_flat", "load_params",
-    "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
+    "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",
+    "load_params", "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
 ]

@@ -22,8 +22,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from . import conversions as C
-from .core import topics as T
-from .core.param_log import RECORD_NAME, ParamRecord
+from ..core import topics as T
+from ..core.param_log import RECORD_NAME, ParamRecord
 
 
 class ParamAnnouncer:

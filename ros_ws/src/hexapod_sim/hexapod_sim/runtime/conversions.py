@@ -27,8 +27,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from .core import topics as T
-from .core.cdr import (
+from ..core import topics as T
+from ..core.cdr import (
     CODECS,
     ENCAPSULATION,
     NS,

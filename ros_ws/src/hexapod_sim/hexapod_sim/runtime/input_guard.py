@@ -21,10 +21,10 @@ from rclpy.node import Node
 from rclpy.serialization import serialize_message
 
 from . import conversions as C
-from .core import msg_checks as M
-from .core import topics as T
-from .core import trace
-from .core.msg_auth import Rejected, Signer, Unsigned, Verifier, run_key
+from ..core import msg_checks as M
+from ..core import topics as T
+from ..core import trace
+from ..core.msg_auth import Rejected, Signer, Unsigned, Verifier, run_key
 
 CONTROLLER_NODES = ("pd_p_controller", "pd_pf_controller")
 GRAPH_NODES = ("hexapod_sim", "trajectory_generator", *CONTROLLER_NODES, "metrics", "markers")

@@ -40,9 +40,10 @@ from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterVal
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from .core.errors import ParameterError
-from .core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams, Spec,
-                          check_value, from_flat, load_params, nearest, unknown_parameter)
+from ..core.errors import ParameterError
+from ..core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams, Spec,
+                           check_spec, check_value, from_flat, load_params, nearest,
+                           unknown_parameter)
 
 #: Parameters (or groups, with a trailing '.') that may change while the graph runs.
 LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
@@ -151,27 +152,19 @@ def declare_params(node: Node, defaults: HexapodParams | None = None) -> Hexapod
     return from_flat(flat)
 
 
-def declare_node_param(node: Node, name: str, default: Any, description: str) -> Any:
-    """Declare a node's own (non-model) parameter; the value converted to the default's type.
+def declare_node_param(node: Node, name: str) -> Any:
+    """Declare one of the node's own parameters (:data:`~hexapod_sim.core.params.NODE_PARAMS`:
+    default, range, meaning) and return its checked value.
 
     Declared with dynamic typing so that ``3`` is accepted where ``3.0`` is meant; a value
-    that cannot be converted raises ParameterError. Read-only: the nodes read these once at
-    start, so a runtime change is refused ("read-only") rather than accepted and ignored.
+    outside the spec raises ParameterError. Read-only: the nodes read these once at start,
+    so a runtime change is refused ("read-only") rather than accepted and ignored.
     """
-    kind = type(default)
-    value = node.declare_parameter(name, default, ParameterDescriptor(
-        name=name, description=f"{description} (read at start: read-only)",
-        dynamic_typing=True, read_only=True)).value
-    if kind is bool:
-        if not isinstance(value, bool):
-            raise ParameterError(name, value, "true or false")
-        return value
-    if kind in (int, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-                kind is int and isinstance(value, float) and not value.is_integer()):
-            raise ParameterError(name, value, f"a number ({kind.__name__})")
-        return kind(value)
-    return str(value)
+    spec = NODE_PARAMS[node.get_name()][name]
+    value = node.declare_parameter(name, spec.default, ParameterDescriptor(
+        name=name, description=f"{spec.description}; allowed {spec.allowed()} "
+        f"(read at start: read-only)", dynamic_typing=True, read_only=True)).value
+    return check_spec(name, spec, value)
 
 
 class ParamBinding:

@@ -13,8 +13,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
-from .core.errors import DivergenceError, HexapodError, ParameterError
-from .core.msg_auth import AuthError
+from ..core.errors import DivergenceError, HexapodError, ParameterError
+from ..core.msg_auth import AuthError
 from .hot_loop import HotLoop, init_rclpy, install_stop_signals
 
 #: Exit code of bad parameters, a bad command line or a missing key.

@@ -50,7 +50,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
-from .core import trace
+from ..core import trace
 from .dds_profile import FASTDDS_PROFILE, private_profile
 
 RawCallback = Callable[[bytes], None]
