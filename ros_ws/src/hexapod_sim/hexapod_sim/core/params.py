@@ -88,7 +88,8 @@ class RobotParams:
 
 @dataclass(frozen=True)
 class SpringDashpot:
-    """Linear spring-dashpots along x and y (the body's and the ground's)."""
+    """Linear spring-dashpots along x and y (the body's and the ground's; model.md "Body
+    compliance", "Ground contact"): F = -K d - B v per axis."""
 
     k_x: float = _f("stiffness K_x (N/m)", 0.0, 1e12)
     k_y: float = _f("stiffness K_y (N/m)", 0.0, 1e12)
