@@ -13,6 +13,7 @@ from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import default_params_path
 
+from .bag_checks import mcap_size
 from .conftest import call, fast_params, hexapod_cli, ros_client, sim_summary
 
 
@@ -146,6 +147,9 @@ def test_two_graphs_on_two_domain_ids_do_not_see_each_other(make_graph, tmp_path
         names = node.get_node_names()
         ex.remove_node(node)
     assert names.count("hexapod_sim") == 1 and names.count("pd_pf_controller") == 1
+    # Enough ticks recorded whatever the machine's load (~4 kB per tick): a written chunk
+    # of more than 1 MB holds some 250 ticks.
+    a.wait_for(lambda: mcap_size(tmp_path / "bag_a") > 1_000_000, 180, "graph a's ticks")
 
     for g in (a, b):
         assert g.stop("hexapod_sim") == 0
