@@ -43,16 +43,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def _reexec_in_env() -> None:
-    if os.environ.get("VIRTUAL_ENV") == str(ROOT / ".venv"):
-        return
-    subprocess.run([str(ROOT / "scripts" / "setup.sh"), "--quiet"], check=True)
-    cmd = f'source "{ROOT}/scripts/env.sh" && exec python "$0" "$@"'
-    os.execvp("bash", ["bash", "-c", cmd, __file__, *sys.argv[1:]])
 
 
 SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time"
@@ -132,7 +125,7 @@ def cpu_available(seconds: float = 1.0) -> float:
 
 
 def main() -> int:
-    _reexec_in_env()
+    reexec_in_env(__file__)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--duration", type=float, default=10.0)

@@ -27,23 +27,15 @@ import argparse
 import multiprocessing
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
 ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics,bench_switch"
 SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time")
-
-
-def _reexec_in_env() -> None:
-    if os.environ.get("VIRTUAL_ENV") == str(ROOT / ".venv"):
-        return
-    subprocess.run([str(ROOT / "scripts" / "setup.sh"), "--quiet"], check=True)
-    cmd = f'source "{ROOT}/scripts/env.sh" && exec python "$0" "$@"'
-    os.execvp("bash", ["bash", "-c", cmd, __file__, *sys.argv[1:]])
 
 
 def _hog() -> None:
@@ -190,7 +182,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
 
 
 def main() -> int:
-    _reexec_in_env()
+    reexec_in_env(__file__)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--switches", type=int, default=50)
     ap.add_argument("--every", type=float, default=0.2, help="simulated s between switches")

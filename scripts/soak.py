@@ -14,23 +14,15 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
 NODES = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
          "metrics")
-
-
-def _reexec_in_env() -> None:
-    if os.environ.get("VIRTUAL_ENV") == str(ROOT / ".venv"):
-        return
-    subprocess.run([str(ROOT / "scripts" / "setup.sh"), "--quiet"], check=True)
-    cmd = f'source "{ROOT}/scripts/env.sh" && exec python "$0" "$@"'
-    os.execvp("bash", ["bash", "-c", cmd, __file__, *sys.argv[1:]])
 
 
 class Client:
@@ -85,7 +77,7 @@ class Client:
 
 
 def main() -> int:
-    _reexec_in_env()
+    reexec_in_env(__file__)
     from hexapod_metrics.cmd_graph import GraphProcesses
     from hexapod_metrics.bag import open_bag, read_joint_state_arrays
     from hexapod_sim.core import topics as T

@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +26,8 @@ from hexapod_metrics.bag import (
 )
 from hexapod_metrics.bag.msgdefs import MESSAGE_TYPES, TYPE_JOINT_STATE
 from hexapod_sim.core import cdr
+
+from killed_writer import write_then_kill
 
 LEGS = [f'leg{i}_{j}' for i in range(1, 7) for j in ('hip', 'knee')]
 FEET = [f'leg{i}_foot_{a}' for i in range(1, 7) for a in ('x', 'y')]
@@ -235,19 +236,8 @@ _KILLED_WRITER = textwrap.dedent('''
 
 def test_sigkill_mid_write_leaves_readable_prefix(tmp_path: Path) -> None:
     path = tmp_path / 'killed'
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    proc = subprocess.Popen([sys.executable, '-c', _KILLED_WRITER, str(path)], env=env)
+    write_then_kill(_KILLED_WRITER, path, 5 * 16 * 1024)
     mcap_file = path / 'killed_0.mcap'
-    deadline = time.monotonic() + 60
-    try:
-        while not (mcap_file.exists() and mcap_file.stat().st_size > 5 * 16 * 1024):
-            assert proc.poll() is None, 'writer process died on its own'
-            assert time.monotonic() < deadline, 'writer flushed no chunk within 60 s'
-            time.sleep(0.02)
-    finally:
-        proc.kill()  # SIGKILL: no close, no summary
-        proc.wait()
-    assert proc.returncode == -signal.SIGKILL
     meta = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     with open_bag(path) as bag:
         # the kill may land between chunks ('not closed') or inside a write (cut record)

@@ -2,11 +2,7 @@
 files, full disk; log-time rules; DDS padding in the decoder."""
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +19,8 @@ from hexapod_metrics.bag import (
 )
 from hexapod_metrics.core.log_times import ControllerLogTimes, marker_array_stamp
 from hexapod_sim.core import cdr
+
+from killed_writer import write_then_kill
 
 mcap_reader = pytest.importorskip("mcap.reader", reason="mcap is not installed")
 highlevel = pytest.importorskip("rosbags.highlevel", reason="rosbags is not installed")
@@ -113,17 +111,8 @@ _KILLED = textwrap.dedent("""
 
 def test_sigkill_leaves_an_indexed_bag_with_its_metadata_records(tmp_path: Path) -> None:
     path = tmp_path / "killed"
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    proc = subprocess.Popen([sys.executable, "-c", _KILLED, str(path)], env=env)
+    write_then_kill(_KILLED, path, 400_000)
     mcap_file = path / "killed_0.mcap"
-    deadline = time.monotonic() + 60
-    try:
-        while not (mcap_file.exists() and mcap_file.stat().st_size > 400_000):
-            assert proc.poll() is None and time.monotonic() < deadline
-            time.sleep(0.01)
-    finally:
-        proc.kill()
-        proc.wait()
     with open(mcap_file, "rb") as fh:
         reader = mcap_reader.SeekingReader(fh)
         records = {m.name: m.metadata for m in reader.iter_metadata()}

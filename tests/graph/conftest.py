@@ -72,6 +72,29 @@ def sim_summary(log: str) -> dict[str, float]:
     return dict(zip(keys, (int(x) for x in m.groups())))
 
 
+#: The nodes of a recorded single-controller run (what the sim waits for before tick 0).
+RECORDED_RUN = ("trajectory_generator", "pd_pf_controller", "metrics")
+
+
+def start_recorded_run(g: GraphProcesses, bag: Path, duration: float) -> None:
+    """Recorder (into ``bag``), trajectory generator, PD-P&F and a sim that stops after
+    ``duration`` simulated s."""
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+            f"wait_for:={','.join(RECORDED_RUN)}")
+
+
+def finish_recorded_run(g: GraphProcesses, timeout: float) -> dict[str, float]:
+    """Wait for the sim of :func:`start_recorded_run` to stop at the end (exit 0), stop the
+    others (the recorder last) and return the sim's summary."""
+    assert g.wait_exit("hexapod_sim", timeout) == 0, g.log("hexapod_sim")
+    summary = sim_summary(g.log("hexapod_sim"))
+    g.stop_all(order=RECORDED_RUN)
+    return summary
+
+
 def hexapod_cli(domain_id: int, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     """Run the ``hexapod`` CLI on a domain id."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id),

@@ -156,6 +156,18 @@ def _assert_genuine_realtime(rec: dict, period: float) -> None:
             f"tick {k}: applied torque {effort[k].ravel()} is no command of the controller")
 
 
+def _assert_run_unchanged(rec: dict, logs: dict[str, str], mode: str, period: float,
+                          duration: float) -> None:
+    """Lockstep: the bag equals a clean run and no tick was missed or late; realtime: every
+    command the sim took was the genuine controller's."""
+    if mode == "lockstep":
+        _assert_equals_clean_run(rec, duration)
+        summary = sim_summary(logs["hexapod_sim"])
+        assert summary["missed"] == 0 and summary["late"] == 0
+    else:
+        _assert_genuine_realtime(rec, period)
+
+
 def _status_values(rec: dict, node: str) -> dict[str, str]:
     from hexapod_sim.core import cdr
 
@@ -186,12 +198,7 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
         assert any(kind in k for k in sent), kind
 
     rec = _read(bag)
-    if mode == "lockstep":
-        _assert_equals_clean_run(rec, duration)
-        summary = sim_summary(logs["hexapod_sim"])
-        assert summary["missed"] == 0 and summary["late"] == 0
-    else:
-        _assert_genuine_realtime(rec, period)
+    _assert_run_unchanged(rec, logs, mode, period, duration)
 
     # Counted per topic and cause, reported in the summary, the status and the log.
     dropped = report["dropped"]
@@ -228,12 +235,7 @@ def test_rogue_node_is_not_at_the_controls_and_is_reported(make_graph, tmp_path,
         assert sent.get(what, 0) > 0, (what, sent)
 
     rec = _read(bag)
-    if mode == "lockstep":
-        _assert_equals_clean_run(rec, duration)
-        summary = sim_summary(logs["hexapod_sim"])
-        assert summary["missed"] == 0 and summary["late"] == 0
-    else:
-        _assert_genuine_realtime(rec, period)
+    _assert_run_unchanged(rec, logs, mode, period, duration)
 
     # Reported: who, which topic, how many.
     who = "/rogue_node"

@@ -15,25 +15,18 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import load_params
 
 from .bag_checks import bag_qos
-from .conftest import sim_summary
+from .conftest import finish_recorded_run, start_recorded_run
 
 DURATION = 3.0
 PERIOD = 0.001  # 1 kHz at 1e-4 s physics (conftest.FAST_TIMING): three cycles, seconds of wall time
-NODES = "trajectory_generator,pd_pf_controller,metrics"
 
 
 def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make_graph,
                                                                              tmp_path):
     bag = tmp_path / "bag"
     g = make_graph()
-    g.start("metrics", f"bag_path:={bag}")
-    g.start("trajectory_generator")
-    g.start("pd_pf_controller")
-    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
-            f"wait_for:={NODES}")
-    assert g.wait_exit("hexapod_sim", 300) == 0, g.log("hexapod_sim")
-    summary = sim_summary(g.log("hexapod_sim"))
-    g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+    start_recorded_run(g, bag, DURATION)
+    summary = finish_recorded_run(g, 300)
     assert summary["missed"] == 0 and summary["late"] == 0
 
     p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD})

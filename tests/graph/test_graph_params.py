@@ -17,10 +17,9 @@ from hexapod_metrics.core.recording import RECORDS_KEY
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import O_TH, O_TQ
 
-from .conftest import call, fast_params, ros_client, sim_summary
+from .conftest import call, fast_params, finish_recorded_run, ros_client, start_recorded_run
 
 DURATION = 4.0
-NODES = "trajectory_generator,pd_pf_controller,metrics"
 
 
 def _wait_sim_time(node, seconds: float, timeout: float = 120.0) -> float:
@@ -50,11 +49,7 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
 
     bag = tmp_path / "bag"
     g = make_graph()
-    g.start("metrics", f"bag_path:={bag}")
-    g.start("trajectory_generator")
-    g.start("pd_pf_controller")
-    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
-            f"wait_for:={NODES}")
+    start_recorded_run(g, bag, DURATION)
     with ros_client(g.domain_id) as node:
         _wait_sim_time(node, 0.5)
         # Hostile input first. Signed with the run's key (a buggy node of the graph): a record
@@ -84,9 +79,7 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
         req = SetParameters.Request(parameters=[Parameter(name="ground.scale", value=value)])
         res = call(node, SetParameters, "/hexapod_sim/set_parameters", req).results[0]
         assert res.successful, res.reason
-    assert g.wait_exit("hexapod_sim", 300) == 0, g.log("hexapod_sim")
-    assert sim_summary(g.log("hexapod_sim"))["missed"] == 0
-    g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+    assert finish_recorded_run(g, 300)["missed"] == 0
 
     # The bag holds every node's start values and the change, checksummed, yaml mirrored.
     with open_bag(bag) as b:

@@ -9,12 +9,11 @@ from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.params import load_params
 
-from .conftest import sim_summary
+from .conftest import finish_recorded_run, start_recorded_run
 
 DURATION = 1.0
 PERIOD = 1e-4  # 10 kHz, the paper experiments' rate
 DT = 5e-5      # and their physics step (the params file's defaults)
-NODES = "trajectory_generator,pd_pf_controller,metrics"
 
 
 def test_lockstep_graph_equals_the_engine_at_10_khz_control(make_graph, tmp_path):
@@ -22,14 +21,8 @@ def test_lockstep_graph_equals_the_engine_at_10_khz_control(make_graph, tmp_path
     # a generous lockstep timeout: this test checks equality, not latency under CI load
     g = make_graph(overrides=(f"sim.dt:={DT}", f"sim.control_period:={PERIOD}",
                               "sim.lockstep_timeout:=5.0"))
-    g.start("metrics", f"bag_path:={bag}")
-    g.start("trajectory_generator")
-    g.start("pd_pf_controller")
-    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={DURATION}",
-            f"wait_for:={NODES}")
-    assert g.wait_exit("hexapod_sim", 600) == 0, g.log("hexapod_sim")
-    summary = sim_summary(g.log("hexapod_sim"))
-    g.stop_all(order=("trajectory_generator", "pd_pf_controller", "metrics"))
+    start_recorded_run(g, bag, DURATION)
+    summary = finish_recorded_run(g, 600)
     assert summary["missed"] == 0 and summary["late"] == 0
 
     p = load_params(**{"sim.dt": DT, "sim.control_period": PERIOD})

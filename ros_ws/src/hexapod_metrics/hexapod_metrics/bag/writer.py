@@ -262,9 +262,9 @@ class BagWriter(Closing):
     ``compression``: ``''`` (default: decoding is then bound by memory bandwidth, about
     twice as fast as with zstd or lz4, see ``scripts/bench_bag_decode.py``), ``'zstd'``
     (level 1, about half the size) or ``'lz4'``. A chunk is written when the reorder buffer
-    holds ``chunk_size`` bytes (default 4 MiB: ``hexapod analyze`` reads 4 MiB chunks ~1.4x
-    faster than 1 MiB ones, per-chunk costs) or every ``flush_interval_s`` (wall s); ``sync_topics``,
-    ``reorder_window_ns`` and ``max_lag_ns`` set its watermark (module docstring).
+    holds ``chunk_size`` bytes (default 4 MiB: ``hexapod analyze`` reads 4 MiB chunks
+    1.5-2x faster than 1 MiB ones, per-chunk costs) or every ``flush_interval_s`` (wall s);
+    ``sync_topics``, ``reorder_window_ns`` and ``max_lag_ns`` set its watermark (module docstring).
     ``custom_data`` goes to ``metadata.yaml``; ``reserve_bytes`` of disk are held back for
     closing the bag when the disk fills up; ``max_file_size`` (bytes) and
     ``max_file_duration_ns`` split the bag into files (0: no limit).
