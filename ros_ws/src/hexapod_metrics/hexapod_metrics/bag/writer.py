@@ -262,8 +262,9 @@ class BagWriter(Closing):
     ``compression``: ``''`` (default: decoding is then bound by memory bandwidth, about
     twice as fast as with zstd or lz4, see ``scripts/bench_bag_decode.py``), ``'zstd'``
     (level 1, about half the size) or ``'lz4'``. A chunk is written when the reorder buffer
-    holds ``chunk_size`` bytes (default 4 MiB: ``hexapod analyze`` reads 4 MiB chunks
-    1.5-2x faster than 1 MiB ones, per-chunk costs) or every ``flush_interval_s`` (wall s);
+    holds ``chunk_size`` bytes (default 1 MiB: a SIGKILL inside the one ``pwrite`` of a
+    chunk and its tail tears the file for every reader but ours, and a bigger chunk makes
+    that window longer; bigger chunks read faster) or every ``flush_interval_s`` (wall s);
     ``sync_topics``, ``reorder_window_ns`` and ``max_lag_ns`` set its watermark (module docstring).
     ``custom_data`` goes to ``metadata.yaml``; ``reserve_bytes`` of disk are held back for
     closing the bag when the disk fills up; ``max_file_size`` (bytes) and
@@ -277,7 +278,7 @@ class BagWriter(Closing):
         path: str | os.PathLike[str],
         *,
         compression: str = '',
-        chunk_size: int = 4 << 20,
+        chunk_size: int = 1 << 20,
         flush_interval_s: float = 1.0,
         metadata_interval_s: float = 0.0,
         custom_data: Mapping[str, str] | None = None,

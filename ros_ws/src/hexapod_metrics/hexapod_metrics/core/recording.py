@@ -99,12 +99,18 @@ def status_indices(status: DiagnosticStatus) -> tuple[Indices, dict[str, str]]:
     return idx, kv
 
 
-def write_run_bag(run: RunResult, path: str | Path) -> Path:
+#: Chunk size of in-process bags: bigger than the recorder's (``hexapod analyze`` reads 4 MiB
+#: chunks 1.5-2x faster than 1 MiB ones); a SIGKILL here ends the run it records anyway.
+RUN_BAG_CHUNK = 4 << 20
+
+
+def write_run_bag(run: RunResult, path: str | Path, chunk_size: int = RUN_BAG_CHUNK) -> Path:
     """Write an in-process run as the graph would record it (every tick of every topic).
 
-    Log time = stamp = simulated time. The command of tick k answers the state of tick k;
-    each full gait cycle is scored by the one scorer (core/cycles.py) from the bytes
-    recorded and its indices are written at its last tick, as the metrics node does.
+    Log time = stamp = simulated time; chunks of ``chunk_size`` bytes. The command of tick k
+    answers the state of tick k; each full gait cycle is scored by the one scorer
+    (core/cycles.py) from the bytes recorded and its indices are written at its last tick,
+    as the metrics node does.
     """
     path = Path(path)
     p = run.params
@@ -112,7 +118,7 @@ def write_run_bag(run: RunResult, path: str | Path) -> Path:
     n_ticks = run.command.shape[0]
     ticks_per_cycle = int(round(p.cycle_time / p.sim.control_period))
     scorer = CycleScorer(ticks_per_cycle, p.sim.control_period)
-    with BagWriter(path, custom_data={"source": SIMULATE_NODE}) as bag:
+    with BagWriter(path, custom_data={"source": SIMULATE_NODE}, chunk_size=chunk_size) as bag:
         for name, spec in TOPICS.items():
             if name not in (T.STATUS, T.MARKERS):  # published by nodes only
                 bag.add_topic(name, spec.msg_type, spec.preset)
