@@ -28,8 +28,9 @@ Crash safety:
   in one ``pwrite``. A writer killed with SIGKILL therefore leaves an indexed file that
   seeking readers (``mcap``, ``rosbags``) open with every chunk flushed; its
   ``hexapod_writer`` record says ``state: open``, so this project's reader reports it as
-  truncated. Only a kill inside that one ``pwrite`` (microseconds per chunk) leaves an
-  unfinished tail, which this project's reader scans.
+  truncated. Only a kill inside that one ``pwrite`` leaves an unfinished tail, which this
+  project's reader scans and the others refuse (the window is one write of up to a chunk:
+  under a millisecond idle, longer for a writer starved of CPU).
 * ``metadata.yaml`` is replaced (temporary file + rename, never half written) at open,
   when a topic is added, after every chunk and at close: it lags the MCAP by at most the
   chunk being written.
