@@ -29,7 +29,7 @@ def test_full_disk_closes_a_readable_bag_reports_it_and_exits_3(make_graph, tmp_
         g = make_graph()
         statuses: list = []
         with ros_client(g.domain_id) as node:
-            node.create_subscription(
+            sub = node.create_subscription(
                 DiagnosticArray, "/hexapod/status",
                 lambda m: statuses.extend(s for s in m.status if s.name == "metrics"
                                           and s.level == b"\x02"),  # ERROR (not heartbeats)
@@ -37,6 +37,10 @@ def test_full_disk_closes_a_readable_bag_reports_it_and_exits_3(make_graph, tmp_
             ex = SingleThreadedExecutor(context=node.context)
             ex.add_node(node)
             g.start("metrics", f"bag_path:={bag}", prefix=disk.prefix)
+            # Matched before the run starts: on a loaded machine discovery can take longer
+            # than the seconds the disk lasts, and an unmatched reader never gets the ERROR.
+            g.wait_for(lambda: ex.spin_once(timeout_sec=0.05) or sub.get_publisher_count() > 0,
+                       120, "the recorder's /hexapod/status matched")
             g.start("trajectory_generator")
             g.start("pd_pf_controller")
             g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller,metrics")

@@ -1,4 +1,5 @@
-"""`hexapod analyze BAG...`: indices per controller segment and per gait cycle, CSV/JSON, plots."""
+"""`hexapod analyze BAG...`: indices per controller segment and per gait cycle, CSV/JSON, plots;
+`hexapod reindex BAG`: a cut-short bag rewritten complete, for the other readers."""
 from __future__ import annotations
 
 import argparse
@@ -7,6 +8,7 @@ import json
 import math
 from pathlib import Path
 
+from .bag import reindex
 from .core.analysis import BagAnalysis, SegmentResult, analyze_bag
 from .core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, lag_growth
 
@@ -130,8 +132,22 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_reindex(args: argparse.Namespace) -> int:
+    src = Path(args.bag)
+    out = Path(args.out) if args.out else src.with_name(src.name + "_reindexed")
+    r = reindex(src, out)
+    print(f"{r.path}: {r.messages} messages on {r.topics} topics from {src} ({r.reason}); "
+          "indexed, opens in any MCAP reader")
+    return 0
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Register `analyze`."""
+    """Register `analyze` and `reindex`."""
+    rp = sub.add_parser("reindex", help="rewrite a cut-short bag (killed recorder) as a "
+                        "complete, indexed one")
+    rp.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    rp.add_argument("--out", help="new bag directory (default BAG_reindexed)")
+    rp.set_defaults(func=_cmd_reindex)
     ap = sub.add_parser("analyze", help="indices of recorded bags, per segment and gait cycle")
     ap.add_argument("bags", nargs="+", metavar="BAG", help="bag directory or .mcap file")
     ap.add_argument("--cycles", action="store_true", help="also print every gait cycle")

@@ -19,11 +19,13 @@ from .reader import (
     read_joint_state_arrays,
     read_joint_state_topics,
 )
+from .reindex import REINDEXED, ReindexResult, reindex
 from .writer import QOS_PRESETS, RESERVE_NAME, BagWriter, QosProfile, qos_yaml
 
 __all__ = [
     'MESSAGE_TYPES',
     'QOS_PRESETS',
+    'REINDEXED',
     'RESERVE_NAME',
     'Bag',
     'BagError',
@@ -34,6 +36,7 @@ __all__ = [
     'MessageDefinitionError',
     'MessageType',
     'QosProfile',
+    'ReindexResult',
     'TopicInfo',
     'iter_joint_state_blocks',
     'lookup',
@@ -41,4 +44,5 @@ __all__ = [
     'qos_yaml',
     'read_joint_state_arrays',
     'read_joint_state_topics',
+    'reindex',
 ]

@@ -257,6 +257,14 @@ class _McapFile:
         elif state == 'failed':
             self.truncated = True
             self.reason = f'the writer stopped early: {info.get("failure", "write failed")}'
+        where = self.metadata_index.get('hexapod_reindexed')  # bag.reindex: a copy
+        if where is not None and where[1] > 9:
+            rd = _Reader(self._read(where[0] + 9, where[1] - 9), self.what)
+            rd.string()
+            made = rd.string_map()
+            self.truncated = True
+            self.reason = (f'reindexed from {made.get("source", "?")}, which was cut short: '
+                           f'{made.get("reason", "?")}')
 
     def _parse_summary(self, data: bytes) -> None:
         pos = 0
