@@ -88,12 +88,17 @@ def test_reindex_refuses_an_existing_directory_and_the_cli_says_so_in_one_line(
     from hexapod_metrics.cli import main
 
     (tmp_path / "taken").mkdir()
+    junk = tmp_path / "junk"
+    junk.mkdir()
+    (junk / "junk_0.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 40)
     with pytest.raises(BagWriteError, match="already exists"):
         reindex(torn, tmp_path / "taken")
     for args in (["reindex", str(torn), "--out", str(tmp_path / "taken")],
-                 ["reindex", str(tmp_path / "nothing")]):
+                 ["reindex", str(tmp_path / "nothing")],
+                 ["reindex", str(junk), "--out", str(tmp_path / "from_junk")]):
         err = io.StringIO()
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             assert main(args) == 2
         lines = err.getvalue().strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("hexapod reindex: error: "), lines
+    assert not (tmp_path / "from_junk").exists()

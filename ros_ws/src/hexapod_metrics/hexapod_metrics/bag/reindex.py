@@ -13,6 +13,7 @@ so an analysis never mistakes it for a complete run.
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 from typing import NamedTuple
 
@@ -54,17 +55,21 @@ def reindex(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> Reindex
         custom = dict((bag.metadata or {}).get('custom_data') or {})
         custom.update({'reindexed_from': str(Path(src)), 'reindex_reason': reason})
         n = 0
-        with BagWriter(out, custom_data={str(k): str(v) for k, v in custom.items()}) as w:
-            for t in bag.topics.values():
-                w.add_topic(t.name, t.msgtype, _qos(t.offered_qos_profiles),
-                            type_hash=t.type_hash)
-            for name, items in bag.metadata_records():
-                if name not in _RESERVED and name != REINDEXED:
-                    w.add_metadata(name, items)
-            w.add_metadata(REINDEXED, {'source': str(Path(src)), 'reason': reason})
-            for topic, log_time, data in bag.messages():
-                w.write(topic, log_time, data)
-                n += 1
+        try:
+            with BagWriter(out, custom_data={str(k): str(v) for k, v in custom.items()}) as w:
+                for t in bag.topics.values():
+                    w.add_topic(t.name, t.msgtype, _qos(t.offered_qos_profiles),
+                                type_hash=t.type_hash)
+                for name, items in bag.metadata_records():
+                    if name not in _RESERVED and name != REINDEXED:
+                        w.add_metadata(name, items)
+                w.add_metadata(REINDEXED, {'source': str(Path(src)), 'reason': reason})
+                for topic, log_time, data in bag.messages():
+                    w.write(topic, log_time, data)
+                    n += 1
+        except BaseException:
+            shutil.rmtree(out, ignore_errors=True)  # no half copy left behind
+            raise
         return ReindexResult(out, n, len(bag.topics), reason)
 
 
