@@ -50,6 +50,9 @@ _U32 = struct.Struct('<I')
 _U64 = struct.Struct('<Q')
 
 
+#: Name of the metadata record that marks a copy made by ``reindex`` (source, reason).
+REINDEXED = 'hexapod_reindexed'
+
 class TopicInfo(NamedTuple):
     """One topic of a bag."""
 
@@ -238,16 +241,22 @@ class _McapFile:
             self.writer = {}
         return True
 
-    def _writer_state(self) -> None:
-        """A summary written by a writer that did not close says so (killed, disk full)."""
-        where = self.metadata_index.get('hexapod_writer')
+    def _indexed_metadata(self, name: str) -> dict[str, str] | None:
+        """The string map of the last Metadata record ``name`` the summary indexes."""
+        where = self.metadata_index.get(name)
         if where is None:
-            return
+            return None
         offset, length = where
-        body = self._read(offset + 9, length - 9) if length > 9 else b''
-        rd = _Reader(body, self.what)
+        rd = _Reader(self._read(offset + 9, length - 9) if length > 9 else b'', self.what)
         rd.string()
-        info = rd.string_map()
+        return rd.string_map()
+
+    def _writer_state(self) -> None:
+        """A summary written by a writer that did not close says so (killed, disk full),
+        and a copy made by :func:`~.reindex.reindex` that its source was cut short."""
+        info = self._indexed_metadata('hexapod_writer')
+        if info is None:
+            return
         self.writer = info
         state = info.get('state', 'closed')
         if state == 'open':
@@ -257,11 +266,8 @@ class _McapFile:
         elif state == 'failed':
             self.truncated = True
             self.reason = f'the writer stopped early: {info.get("failure", "write failed")}'
-        where = self.metadata_index.get('hexapod_reindexed')  # bag.reindex: a copy
-        if where is not None and where[1] > 9:
-            rd = _Reader(self._read(where[0] + 9, where[1] - 9), self.what)
-            rd.string()
-            made = rd.string_map()
+        made = self._indexed_metadata(REINDEXED)
+        if made is not None:
             self.truncated = True
             self.reason = (f'reindexed from {made.get("source", "?")}, which was cut short: '
                            f'{made.get("reason", "?")}')

@@ -18,11 +18,9 @@ from pathlib import Path
 from typing import NamedTuple
 
 from .errors import BagWriteError
-from .reader import open_bag
+from .reader import REINDEXED, open_bag
 from .writer import BagWriter
 
-#: Name of the metadata record that marks a reindexed bag (source, reason).
-REINDEXED = 'hexapod_reindexed'
 _RESERVED = ('rosbag2', 'hexapod_writer')
 
 
