@@ -5,10 +5,12 @@ Each run starts a fresh graph in realtime mode (1 kHz by default) on its own
 ROS_DOMAIN_ID, and, with --switches N, hands control back and forth N times, one switch
 every --every simulated seconds, through the sim's standard ``set_parameters`` service from
 one client node that joined before tick 0 (what `hexapod switch` does, without a new
-process per switch). From the bag it counts, per switch, the ticks from the one before the
-switch to 3 after it that no command of the controller named in the state answered
-(late or not): a switch with any such tick *lost a tick*. It also prints the share of
-ticks whose command arrived within its period, with and without switching.
+process per switch), or with --via tool by running scripts/switch_controller.sh (a new
+process per switch, through the sim's local switch channel: what a user does). From the
+bag it counts, per switch, the ticks from the one before the switch to 3 after it that no
+command of the controller named in the state answered (late or not): a switch with any
+such tick *lost a tick*. It also prints the share of ticks whose command arrived within
+its period, with and without switching.
 
 --hog adds one CPU hog (a busy loop in its own process) beside the graph.
 
@@ -18,6 +20,7 @@ status messages in each bag it prints the share of on-time ticks before and afte
 moment, so a dead idle controller's cost shows against the same run without a kill.
 
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
+       [--via service|tool]
        [--no-baseline] [--kill-idle S]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
@@ -27,6 +30,7 @@ import argparse
 import multiprocessing
 import os
 import re
+import subprocess
 import sys
 import tempfile
 import time
@@ -155,10 +159,19 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
         for i in range(switches):
             due = start + (i + 1) * args.every
             time.sleep(max(0.0, due - time.monotonic()))  # the bench process sleeps between
-            value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=target)
-            future = client.call_async(SetParameters.Request(
-                parameters=[Parameter(name="run.controller", value=value)]))
-            ex.spin_until_future_complete(future, timeout_sec=10)
+            if args.via == "tool":
+                done = subprocess.run([str(ROOT / "scripts" / "switch_controller.sh"), target],
+                                      env={**os.environ, "ROS_DOMAIN_ID": str(domain)},
+                                      capture_output=True, text=True, timeout=60)
+                if done.returncode:
+                    raise RuntimeError(f"switch_controller.sh {target}: {done.stderr.strip()}"
+                                       f"\n--- the sim's log:\n{g.log('hexapod_sim')[-3000:]}")
+            else:
+                value = ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                       string_value=target)
+                future = client.call_async(SetParameters.Request(
+                    parameters=[Parameter(name="run.controller", value=value)]))
+                ex.spin_until_future_complete(future, timeout_sec=10)
             target = "pd_pf" if target == "pd_p" else "pd_p"
         g.wait_exit("hexapod_sim", duration * 20 + 120)
     finally:
@@ -192,6 +205,9 @@ def main() -> int:
     ap.add_argument("--dt", type=float, default=1e-4, help="physics step (s)")
     ap.add_argument("--duration", type=float, default=10.0, help="s of the run without switches")
     ap.add_argument("--hog", action="store_true", help="one CPU hog beside the graph")
+    ap.add_argument("--via", choices=("service", "tool"), default="service",
+                    help="how to switch: the sim's set_parameters service from this process "
+                    "(default), or scripts/switch_controller.sh, a new process per switch")
     ap.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
                     help="graph mode (lockstep: compare real-time factors)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
@@ -204,7 +220,8 @@ def main() -> int:
         hog = multiprocessing.Process(target=_hog, daemon=True)
         hog.start()
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
-          f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz")
+          f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz; "
+          f"switching through {'switch_controller.sh' if args.via == 'tool' else 'set_parameters'}")
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:
         with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:

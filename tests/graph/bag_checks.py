@@ -7,6 +7,7 @@ from typing import Any
 import yaml
 
 from hexapod_metrics.core.recording import TICK_TOPICS
+from hexapod_sim.core.params import NODE_PARAMS
 
 MS = 1_000_000
 
@@ -85,8 +86,9 @@ def check_indexed_ordered_bag(bag: Path, missed: int = 0) -> dict[str, list[int]
         assert lost <= allowed, f"{topic}: {lost} ticks missing ({gaps[:3]}), {allowed} missed"
     ends = {t: by_topic[t][-1] for t in TICK_TOPICS if t != "/hexapod/reference"}
     assert len(set(ends.values())) == 1, f"tick topics end at different ticks: {ends}"
-    # the reference runs one tick ahead of the state it answers
-    assert by_topic["/hexapod/reference"][-1] - next(iter(ends.values())) in (0, MS)
+    # the references run up to the trajectory generator's lookahead ahead of the states
+    lookahead = NODE_PARAMS["trajectory_generator"]["lookahead"].default
+    assert 0 <= by_topic["/hexapod/reference"][-1] - next(iter(ends.values())) <= lookahead * MS
     assert {t: len(v) for t, v in by_topic.items()} == {
         t: n for t, n in seen["stats"].items() if n}
     # rosbags reads the same messages (indexed, so in log-time order)

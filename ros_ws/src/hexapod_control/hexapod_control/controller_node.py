@@ -9,10 +9,10 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 (default true) the node configures and activates itself at start, so no lifecycle manager
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
-Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
-(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces
-with the same stamp are there (both architectures wait for the same set, so their timing
-is the same): the demanded torque
+Per tick: the newest ``/hexapod/joint_states`` message, if its header.frame_id names this
+controller (``hexapod_sim.core.labels.in_charge``), is answered once the reference and the
+foot forces with the same stamp are there (both architectures wait for the same set, so
+their timing is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
 ``/hexapod/joint_commands`` with header.stamp = the state's stamp and frame_id = the
@@ -21,18 +21,36 @@ waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken a
 controller that is not in charge costs one wake-up per tick and is ready to take over at
 any tick boundary. Every input goes through the guard (``hexapod_sim.runtime.input_guard``) and
 every command is signed with the run's key.
+
+A controller that is not in charge does not wake at every state: it takes its queued states,
+foot forces and references every ``IDLE_DRAIN`` s (checking only the newest state, and only
+the inputs from that tick on), so the graph's two cores are not shared with a controller
+that has nothing to do. It wakes at once when ``/hexapod/active_controller`` (published by
+the sim at the tick boundary of a switch, before the first state that names the new
+controller) names it, or when a drained state does, and answers from that state on.
+
+Only the newest state is answered. In lockstep the sim sends the next state only after the
+command (or the timeout), so every state is the newest; in realtime a controller that fell
+behind (states queued at a wake-up, or a state still waiting for its inputs when a newer one
+comes) skips the older states, which are past their deadline, instead of answering them one
+by one and staying behind: answering a backlog in order once kept a controller 10-50 ticks
+late for tens of ms. Skipped states (authenticated only, so that a replayed copy is still
+refused) and the inputs of older ticks (not checked: they would not be used) are counted
+(``superseded`` in the status and the end summary).
 """
 from __future__ import annotations
 
 import sys
+import time
 from typing import Any
 
 import numpy as np
 from hexapod_sim.core import msg_checks as M
 from hexapod_sim.core import topics as T
 from hexapod_sim.core import trace as _trace
+from hexapod_sim.core.trace import header_stamp
 from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.params import N_LEGS, HexapodParams
+from hexapod_sim.core.params import CONTROLLERS, N_LEGS, HexapodParams
 from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
@@ -42,12 +60,14 @@ from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
 from hexapod_sim.runtime import conversions as C
 
 from .core.controllers import control_law, controller_code, gain_vector
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
+IDLE_DRAIN = 0.005  # s between two takes of the queued inputs while not in charge
 
 
 class ControllerNode(LifecycleNode):
@@ -69,7 +89,8 @@ class ControllerNode(LifecycleNode):
         self.lifecycle = "unconfigured"
         self.status_now = self.guard.publish_status(
             self.get_name(), lambda: self.window.newest or 0,
-            extra=lambda: {"lifecycle": self.lifecycle})
+            extra=lambda: {"lifecycle": self.lifecycle, "superseded": self.superseded_text(),
+                           "in_charge": str(self.hot).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
         self.js_codec = C.CODECS[T.JOINT_STATES]
@@ -79,6 +100,7 @@ class ControllerNode(LifecycleNode):
         self.pub: Any = None
         self.subs: dict[str, Any] = {}
         self.active = False
+        self.hot = True  # in charge as far as we know: woken by every state
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
         # States of ours waiting for their reference or foot forces (answered, in order, as
@@ -90,6 +112,9 @@ class ControllerNode(LifecycleNode):
         self.demand = np.zeros((N_LEGS, 2))
         self.answered = 0
         self.waited = 0  # states whose reference or foot forces came after them
+        self.given_up = 0  # states of ours not answered: a newer state came first
+        self.skipped_inputs = 0  # references and foot forces of ticks before the newest state
+        self.input_floor = -1  # stamp of the newest state: inputs before it are not needed
         self._load_gains(self.binding.params)
         self.period_ns = int(round(self.binding.params.sim.control_period * 1e9))
         self._law()  # warm up the compiled law before the first tick
@@ -125,6 +150,9 @@ class ControllerNode(LifecycleNode):
         self.subs[T.FOOT_FORCES] = self.loop.subscribe(
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
+        self.subs[T.ACTIVE_CONTROLLER] = self.loop.subscribe(
+            String, T.ACTIVE_CONTROLLER, self._on_announce,
+            C.TOPIC_QOS[T.ACTIVE_CONTROLLER].subscriber(10))
         self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
                       f"{tuple(float(g) for g in self.gains)}")
         self._entered("inactive")
@@ -140,7 +168,10 @@ class ControllerNode(LifecycleNode):
         if T.JOINT_STATES not in self.subs:
             self.subs[T.JOINT_STATES] = self.loop.subscribe(
                 JointState, T.JOINT_STATES, self._on_state,
-                C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
+                C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH), wake=self.hot,
+                newest=lambda data: self.guard.payload(T.JOINT_STATES, data))
+            if not self.hot:
+                self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
         self.active = True
         self.log.info("active: answering the states that name "
                       f"'{self.arch}' as the controller in charge")
@@ -184,9 +215,48 @@ class ControllerNode(LifecycleNode):
         self._entered("finalized")
         return TransitionCallbackReturn.SUCCESS
 
+    # ------------------------------------------------------------------ in charge or idle
+    def _set_hot(self, hot: bool) -> None:
+        """In charge (woken by every state) or idle (drained every IDLE_DRAIN s)."""
+        if hot == self.hot:
+            return
+        self.hot = hot
+        sub = self.subs.get(T.JOINT_STATES)
+        if sub is None:
+            return
+        self.loop.set_wake(sub, hot)
+        self.loop.set_deadline(None if hot else time.monotonic() + IDLE_DRAIN,
+                               None if hot else self._drain)
+
+    def _on_announce(self, data: bytes) -> None:
+        """``/hexapod/active_controller``: wake up if it names us, else go idle."""
+        got = self.guard.string(T.ACTIVE_CONTROLLER, data, CONTROLLERS)
+        if got is not None:
+            self._set_hot(got[1] == self.arch)
+
+    def _drain(self) -> None:
+        """Idle: take the queued states (the newest is checked: it may name us) and, with
+        it, the inputs; then again in IDLE_DRAIN s."""
+        sub = self.subs.get(T.JOINT_STATES)
+        if sub is None or self.hot:
+            return
+        self.loop.take(sub)
+        if not self.hot:
+            self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
+
     # ------------------------------------------------------------------ per tick
+    def superseded_text(self) -> str:
+        """States skipped for a newer one, states given up, inputs of older ticks skipped."""
+        skipped = self.loop.superseded.get(T.JOINT_STATES, 0)
+        return (f"{skipped} states skipped at a wake-up, {self.given_up} waiting states given "
+                f"up, {self.skipped_inputs} inputs of older ticks not taken in")
+
     def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
-        """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED)."""
+        """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED);
+        one of a tick before the newest state is not needed, and not even checked."""
+        if 0 <= header_stamp(data) < self.input_floor:
+            self.skipped_inputs += 1
+            return
         msg = self.guard.joint_state(topic, data, self.period_ns, self.window)
         if msg is None:
             return
@@ -202,8 +272,9 @@ class ControllerNode(LifecycleNode):
     def _on_forces(self, data: bytes) -> None:
         self._on_input(T.FOOT_FORCES, self.forces, data)
 
-    def _on_state(self, data: bytes) -> None:
-        """A state: ours to answer if it names this controller (and we are active).
+    def _on_state(self, data: bytes) -> bool:
+        """A state: ours to answer if it names this controller (and we are active); False
+        if the guard dropped it (the hot loop then offers the next older one).
 
         Reference and foot forces do not wake the loop (hot_loop.py): they queue in their
         subscriptions (``conversions.CONTROL_DEPTH`` deep) and are taken here, at every state, also
@@ -215,17 +286,24 @@ class ControllerNode(LifecycleNode):
         js = self.guard.joint_state(T.JOINT_STATES, data, self.period_ns, self.window,
                                     advance=True)
         if js is None:
-            return
+            return False
         stamp = js.stamp_ns
+        self.input_floor = stamp
+        for old in [s for s in self.pending if s < stamp]:  # past their deadline
+            del self.pending[old]
+            self.given_up += 1
         if T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
-        mine = in_charge(js.frame_id) == self.arch and self.active
+        named = in_charge(js.frame_id)
+        mine = named == self.arch and self.active
+        if mine and not self.hot:
+            self._set_hot(True)
+        elif named != self.arch and named in CONTROLLERS and self.hot:
+            self._set_hot(False)
         if mine:
             self.last_state = stamp
             self.pending[stamp] = js
-            if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give up the oldest
-                del self.pending[min(self.pending)]
             self._answer()
             if self.pending:  # an input is late: let it wake us
                 self.waited += 1
@@ -240,6 +318,7 @@ class ControllerNode(LifecycleNode):
         for buf in (self.refs, self.forces):
             for s in [s for s in buf if s < keep]:
                 del buf[s]
+        return True
 
     def _answer(self) -> None:
         """Compute and publish the command of each pending state whose inputs are there."""
@@ -286,7 +365,8 @@ def _start(node: ControllerNode) -> None:
 
 def _finish(node: ControllerNode, code: int) -> int:
     node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                  f"their reference or foot forces); inputs: {node.guard.summary()}")
+                  f"their reference or foot forces; superseded: {node.superseded_text()}); "
+                  f"inputs: {node.guard.summary()}")
     if node.pub is not None:
         node.pub.wait_for_all_acked(Duration(seconds=1))
     return code

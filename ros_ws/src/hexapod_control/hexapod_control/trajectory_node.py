@@ -1,8 +1,14 @@
 """Node ``trajectory_generator``: publishes the reference trajectories on ``/hexapod/reference``.
 
-On ``/clock`` at t_k it publishes the reference for t_k (unless already published) and for
-t_{k+1} .. t_{k+lookahead} (parameter ``lookahead``, default 1), so that the controller
-normally has the reference of a tick before that tick's state arrives. Each message is
+Its clock is the sim's authenticated ``/hexapod/joint_states``: every ``publish_interval``
+wall seconds (default 5 ms) it takes the states queued since, checks the newest (tick k) and
+publishes the references not yet published through t_{k+lookahead} (default 50 ticks), so
+the controllers have the reference of a tick long before its state arrives, and the node
+wakes 200 times a second instead of at every tick (at 1 kHz a wake-up per state cost a
+quarter of a core on a 2-core machine that the control loop was short of). The lookahead
+must cover the ticks of one interval (50 ticks: 10 kHz of simulated ticks per wall
+second); a controller whose reference is late waits for it. ``publish_interval: 0.0``
+publishes at every state. Each message is
 stamped with the time it is for; its columns are
 :func:`hexapod_sim.core.topics.reference_columns` of :func:`hexapod_sim.core.gait.reference`
 (paper eqs. 1-4). References are computed a block of ticks at a time, at the same instants
@@ -14,6 +20,7 @@ recorder that matches late still receives the recent references.
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 from hexapod_sim.core import msg_checks as M
@@ -46,6 +53,7 @@ class TrajectoryNode(Node):
         self.window = M.StampWindow()
         self.binding = ParamBinding(self, declare_params(self))
         self.lookahead = declare_node_param(self, "lookahead")
+        self.interval = declare_node_param(self, "publish_interval")
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))
@@ -58,8 +66,13 @@ class TrajectoryNode(Node):
                                          C.TOPIC_QOS[T.REFERENCE].publisher())
         self.signer = self.guard.signer(T.REFERENCE)
         self._reference_of(0)  # warm up (and validate) before the first clock arrives
-        self.loop.subscribe(JointState, T.JOINT_STATES, self._on_clock,
-                            C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
+        # The newest state alone says how far to publish (see _on_clock).
+        self.states = self.loop.subscribe(
+            JointState, T.JOINT_STATES, self._on_clock,
+            C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH), wake=self.interval == 0,
+            newest=lambda data: self.guard.payload(T.JOINT_STATES, data))
+        if self.interval > 0:
+            self.loop.set_deadline(time.monotonic() + self.interval, self._poll)
         self.announcer = ParamAnnouncer(self, self.period, lambda: self.next_tick)
 
     def _block(self, b: int) -> Reference:
@@ -77,11 +90,19 @@ class TrajectoryNode(Node):
         return T.reference_columns(ref.theta[i], ref.theta_vel[i], ref.hip[i], ref.hip_vel[i],
                                    ref.foot[i], ref.foot_vel[i])
 
-    def _on_clock(self, data: bytes) -> None:
+    def _poll(self) -> None:
+        """Take the states queued since the last poll (the newest counts), then again in
+        ``publish_interval`` s."""
+        self.loop.take(self.states)
+        self.loop.set_deadline(time.monotonic() + self.interval, self._poll)
+
+    def _on_clock(self, data: bytes) -> bool:
+        """A state (the newest taken at a wake-up): publish the references from the first
+        not yet published through its tick + lookahead; False if the guard dropped it."""
         got = self.guard.joint_state(T.JOINT_STATES, data, self.period_ns, self.window,
                                      advance=True)
         if got is None:
-            return
+            return False
         k = C.tick_of(got.stamp_ns, self.period_ns)
         if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
             self.log.info(f"clock went back to tick {k}: restarting the references")
@@ -97,6 +118,7 @@ class TrajectoryNode(Node):
         last = self.next_tick - 1
         if last % BLOCK_TICKS >= BLOCK_TICKS // 2:  # past half a block: prepare the next
             self._block(last // BLOCK_TICKS + 1)
+        return True
 
 
 def _finish(node: TrajectoryNode, code: int) -> int:

@@ -12,17 +12,18 @@ import json
 import sys
 from typing import Callable, Sequence
 
-import numpy as np
-
 from hexapod_sim.core.errors import HexapodError
 
 from .cli_args import OneLineParser, param_value, params_arguments, params_from_args, parse_value
-from .bag import BagError
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.
 COMMAND_MODULES = ("hexapod_metrics.cmd_graph", "hexapod_metrics.cmd_experiments",
                    "hexapod_metrics.cmd_analyze", "hexapod_metrics.animation")
+#: Subcommands that talk to a running graph: parsed and run by cmd_graph alone, without
+#: importing the engine, numba and the plots (a second of CPU that a realtime graph on the
+#: same cores would feel).
+GRAPH_COMMANDS = ("switch", "status")
 
 
 def _fmt(v: float) -> str:
@@ -119,6 +120,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: run a subcommand; project errors become one line and exit code 2."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in GRAPH_COMMANDS:
+        from .cmd_graph import main as graph_main
+
+        return graph_main(argv)
+    import numpy as np
+
+    from .bag import BagError
+
     args = build_parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
     np.seterr(all="ignore")

@@ -19,7 +19,6 @@ import math
 import sys
 from typing import Any, Callable, NoReturn
 
-import numpy as np
 import yaml
 
 from hexapod_sim.core.errors import HexapodError, ParameterError
@@ -98,6 +97,8 @@ control_rate = number(0.0, 1e6, "a control rate (Hz)", lo_open=True)
 
 def parse_range(text: str) -> list[float]:
     """'10:1000:21' (log-spaced), 'a:b:n:lin' (linear) or '1,2,3'; ValueError says why."""
+    import numpy as np  # here: `hexapod switch` imports this module and must start fast
+
     form = "'LO:HI:N' (log-spaced), 'LO:HI:N:lin' or a comma list of numbers"
     if ":" in text:
         parts = text.split(":")

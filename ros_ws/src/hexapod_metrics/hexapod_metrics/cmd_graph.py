@@ -30,12 +30,11 @@ from pathlib import Path
 from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
-from hexapod_sim.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file
 from hexapod_sim.core.params import CONTROLLERS
 from hexapod_sim.runtime.dds_profile import private_profile
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
-from .cli_args import number
+from .cli_args import OneLineParser, number
 
 #: node name -> (module, entry point)
 NODES: dict[str, tuple[str, str]] = {
@@ -90,6 +89,9 @@ class GraphProcesses:
         self.env = {**os.environ, **(env or {})}
         self.env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         self.env["PYTHONUNBUFFERED"] = "1"
+        # Here, not at the top: `hexapod switch` imports this module and must start fast.
+        from hexapod_sim.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file
+
         if self.env.get(AUTH_ENV, "on").lower() != "off" and not self.env.get(KEY_ENV):
             key = new_key_file()
             self.env[KEY_ENV] = str(key)
@@ -383,7 +385,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m hexapod_metrics.cmd_graph switch|status ...``: the same subcommands as
     ``hexapod``, without importing the rest of the CLI (the engine, numba, plots: seconds),
     for scripts/switch_controller.sh. Errors are one line and exit code 2, as in ``hexapod``."""
-    parser = argparse.ArgumentParser(prog="hexapod")
+    parser = OneLineParser(prog="hexapod")
     add_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     try:

@@ -55,6 +55,7 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "markers": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES), ()),
 }
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
+STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 
 
 class SimNode(Node):
@@ -112,7 +113,8 @@ class SimNode(Node):
             self.log.warning(f"no local switch channel ({err}); `hexapod switch` uses the "
                              f"ROS parameter service instead")
         self.state_clients: dict[str, Any] = {}
-        self.state_checks: list[tuple[str, str, Any]] = []  # (controller, reply to, future)
+        # (controller, reply to, future, monotonic time to give up)
+        self.state_checks: list[tuple[str, str, Any, float]] = []
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(STATUS_PERIOD, self._publish_status, clock=self.steady)
 
@@ -206,16 +208,15 @@ class SimNode(Node):
         from lifecycle_msgs.srv import GetState
 
         names = [n for n in self.wait_for if n.endswith("_controller")]
-        clients = [self.create_client(GetState, f"/{n}/get_state") for n in names]
-        self.loop.refresh()
+        # Kept for the switch channel's checks: a client made at switch time may send its
+        # request before the controller's service has matched it, and wait forever.
+        clients = [self._state_client(n) for n in names]
         futures = [c.call_async(GetState.Request()) for c in clients]
         self.loop.spin(until=lambda: all(f.done() for f in futures), timeout=5.0)
-        for name, client, future in zip(names, clients, futures):
+        for name, future in zip(names, futures):
             state = future.result().current_state.label if future.done() else "not answering"
             if state != "active":
                 self.log.warning(f"{name} is {state}: it answers only once active")
-            self.destroy_client(client)
-        self.loop.refresh()
 
     def start(self) -> None:
         """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
@@ -342,10 +343,17 @@ class SimNode(Node):
         lifecycle state, then set run.controller as a ROS client would."""
         assert self.channel is not None
         if self.state_checks:
-            done = [c for c in self.state_checks if c[2].done()]
-            self.state_checks = [c for c in self.state_checks if not c[2].done()]
-            for to, addr, future in done:
-                self._switch_checked(to, addr, future)
+            now = time.monotonic()
+            waiting = []
+            for to, addr, future, until in self.state_checks:
+                if future.done():
+                    self._switch_checked(to, addr, future)
+                elif now > until:  # a request lost before the service matched: say so
+                    self.channel.reply(addr, f"error {to}_controller did not answer its "
+                                             f"get_state within {STATE_CHECK_TIMEOUT:g} s")
+                else:
+                    waiting.append((to, addr, future, until))
+            self.state_checks = waiting
         for text, addr in self.channel.poll():
             parts = text.split()
             if len(parts) != 2 or parts[0] != "switch":
@@ -363,22 +371,30 @@ class SimNode(Node):
                 continue
             self._ask_state(to, addr)
 
-    def _ask_state(self, to: str, addr: str) -> None:
+    def _state_client(self, name: str) -> Any:
+        """The (kept) client of controller node ``name``'s lifecycle get_state service."""
         from lifecycle_msgs.srv import GetState
 
-        name = f"{to}_controller"
         client = self.state_clients.get(name)
         if client is None:
             client = self.state_clients[name] = self.create_client(GetState,
                                                                    f"/{name}/get_state")
             self.loop.refresh()
+        return client
+
+    def _ask_state(self, to: str, addr: str) -> None:
+        from lifecycle_msgs.srv import GetState
+
+        name = f"{to}_controller"
+        client = self._state_client(name)
         if not client.service_is_ready():
             assert self.channel is not None
             self.channel.reply(addr, f"error controller node {name} is not running on "
                                      f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
                                      f"(no /{name}/get_state): start it first")
             return
-        self.state_checks.append((to, addr, client.call_async(GetState.Request())))
+        self.state_checks.append((to, addr, client.call_async(GetState.Request()),
+                                  time.monotonic() + STATE_CHECK_TIMEOUT))
 
     def _switch_checked(self, to: str, addr: str, future: Any) -> None:
         assert self.channel is not None

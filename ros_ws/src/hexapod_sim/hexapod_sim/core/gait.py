@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from .errors import UnreachableTargetError
-from .kinematics import N_LEGS, ik_scalar, joint_rates
+from .kinematics import ik_scalar, joint_rates
+from .params import N_LEGS
 
 
 class GaitModel(Protocol):

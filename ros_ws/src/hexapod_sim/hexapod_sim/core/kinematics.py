@@ -18,8 +18,6 @@ from numba import njit
 
 from .errors import UnreachableTargetError
 
-N_LEGS = 6  # three legs a side, each this planar two-link chain
-
 
 @njit(cache=True)
 def knee_offset(th1, l1):  # type: ignore[no-untyped-def]

@@ -21,9 +21,9 @@ from typing import Any, Mapping
 import yaml
 
 from .errors import ParameterError, ParamsFileError
-from .gait import reach_bounds
-from .kinematics import N_LEGS
+
 CONTROLLERS = ("pd_p", "pd_pf")
+N_LEGS = 6  # three legs a side, each a planar two-link chain (kinematics.py)
 MODES = ("lockstep", "realtime")
 INTEGRATORS = ("implicit_ground_damping", "semi_implicit_euler")
 
@@ -287,6 +287,8 @@ def validate(p: HexapodParams) -> HexapodParams:
         raise ParameterError("sim.control_period", p.sim.control_period,
                              f"an integer multiple of sim.dt = {p.sim.dt:g}")
     # Reachability of the whole gait: the hip-foot distance over a cycle (eq. 4a).
+    from .gait import reach_bounds  # numba: loaded only when a gait is checked
+
     lo, hi = reach_bounds(p)
     r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
     r_max = p.robot.leg_length_1 + p.robot.leg_length_2
@@ -320,6 +322,8 @@ def _reach_culprit(p: HexapodParams, candidates: tuple[str, ...], too_far: bool)
     """The parameter at fault for an unreachable gait: the first of ``candidates`` that
     differs from the shipped base case and, put back to its base value, makes the gait
     reach (else the first that differs, else the first candidate)."""
+    from .gait import reach_bounds
+
     flat = p.to_flat()
     base = _base_flat()
     changed = [n for n in candidates if flat[n] != base.get(n, flat[n])]
@@ -382,7 +386,9 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
         "summary_path": _node(str, "", "write the end summary as JSON to this file ('' = no)"),
     },
     "trajectory_generator": {
-        "lookahead": _node(int, 1, "ticks published ahead of the clock", 0, 1000)},
+        "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),
+        "publish_interval": _node(float, 0.005, "wall s between two bursts of references "
+                                  "(0: a burst at every state)", 0.0, 1.0)},
     "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start")},
     "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start")},
     "metrics": {

@@ -9,6 +9,13 @@ SingleThreadedExecutor, 0.28-0.34 ms with this loop). So each node splits its en
 * *hot* subscriptions (raw, serialized bytes) are created through :meth:`HotLoop.subscribe`
   in a callback group that executors never run; :meth:`HotLoop.spin` waits on them alone
   and takes every pending message as soon as it arrives. A subscription made with
+  ``newest=True`` serves a node that acts on the newest sample only (a controller answers
+  the newest state; the states it fell behind on are past their deadline): of the messages
+  queued at a wake-up, its callback gets the newest first, then older ones until one is
+  accepted (the callback returns True); the rest are *superseded*, counted per topic in
+  :attr:`HotLoop.superseded`, never acted on, and given to ``superseded(data)`` (the node
+  authenticates them there, so that a replayed copy of one is still refused as seen
+  before). A subscription made with
   ``wake=False`` does not wake the loop: its messages wait until the node takes them
   (:meth:`HotLoop.take`), e.g. when another topic's message needs them; every wake-up
   costs CPU that the other processes of a 2-core machine are waiting for;
@@ -53,7 +60,7 @@ from rclpy.subscription import Subscription
 from ..core import trace
 from .dds_profile import FASTDDS_PROFILE, private_profile
 
-RawCallback = Callable[[bytes], None]
+RawCallback = Callable[[bytes], Any]  # ``newest`` subscriptions: True if accepted
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
 MAX_WAIT = 0.1
 
@@ -91,8 +98,13 @@ class HotLoop:
         self._group = _NeverExecuted()
         self._subs: list[tuple[Subscription, Any, RawCallback]] = []
         self._sleeping: set[int] = set()  # id() of subscriptions that do not wake the loop
+        # id() of subscriptions served newest first -> what takes their superseded messages
+        self._newest: dict[int, RawCallback] = {}
+        #: Messages taken but never given to their callback, per topic: a newer one of a
+        #: ``newest`` subscription was accepted at the same wake-up.
+        self.superseded: dict[str, int] = {}
         self._wait_set: Any = None
-        self._handles: list[tuple[Any, int, Any, RawCallback, str]] = []
+        self._handles: list[tuple[Any, int, Any, RawCallback, str, RawCallback | None]] = []
         self._others: tuple[list[Any], list[Any], list[Any]] = ([], [], [])
         self._deadline: float | None = None
         self._deadline_cb: Callable[[], None] | None = None
@@ -103,13 +115,17 @@ class HotLoop:
 
     # ------------------------------------------------------------------ entities
     def subscribe(self, msg_type: Any, topic: str, callback: RawCallback,
-                  qos: QoSProfile, wake: bool = True) -> Subscription:
-        """A raw subscription whose callback receives the serialized message (bytes)."""
+                  qos: QoSProfile, wake: bool = True,
+                  newest: RawCallback | None = None) -> Subscription:
+        """A raw subscription whose callback receives the serialized message (bytes); with
+        ``newest`` (the handler of superseded messages), served newest first (module doc)."""
         sub = self.node.create_subscription(msg_type, topic, callback, qos, raw=True,
                                             callback_group=self._group)
         self._subs.append((sub, msg_type, callback))
         if not wake:
             self._sleeping.add(id(sub))
+        if newest is not None:
+            self._newest[id(sub)] = newest
         self._wait_set = None
         return sub
 
@@ -117,6 +133,7 @@ class HotLoop:
         """Destroy a subscription made by :meth:`subscribe`."""
         self._subs = [s for s in self._subs if s[0] is not sub]
         self._sleeping.discard(id(sub))
+        self._newest.pop(id(sub), None)
         self._wait_set = None
         self.node.destroy_subscription(sub)
 
@@ -135,22 +152,39 @@ class HotLoop:
         self._wait_set = None
 
     def take(self, sub: Subscription) -> int:
-        """Take every message queued on ``sub`` now and run its callback on each."""
-        tr = trace.TRACER
+        """Take every message queued on ``sub`` now and run its callback on each (newest
+        first until one is accepted, for a ``newest`` subscription); how many were taken."""
         for s, msg_type, cb in self._subs:
             if s is sub:
-                h = s.handle
-                n = 0
-                while True:
-                    t0 = time.time_ns() if tr is not None else 0
-                    taken = h.take_message(msg_type, True)
-                    if taken is None:
-                        return n
-                    if tr is not None:
-                        tr.taken(s.topic_name, t0, taken[0], taken[1])
-                    cb(taken[0])
-                    n += 1
+                return self._take(s.handle, msg_type, cb, s.topic_name,
+                                  self._newest.get(id(s)))
         return 0
+
+    def _take(self, h: Any, msg_type: Any, cb: RawCallback, topic: str,
+              newest: RawCallback | None) -> int:
+        tr = trace.TRACER
+        batch: list[bytes] = []
+        n = 0
+        while True:
+            t0 = time.time_ns() if tr is not None else 0
+            taken = h.take_message(msg_type, True)
+            if taken is None:
+                break
+            n += 1
+            if tr is not None:
+                tr.taken(topic, t0, taken[0], taken[1])
+            if newest is not None:
+                batch.append(taken[0])
+            else:
+                cb(taken[0])
+        for i in range(len(batch) - 1, -1, -1):
+            if cb(batch[i]):
+                if i and newest is not None:
+                    self.superseded[topic] = self.superseded.get(topic, 0) + i
+                    for data in batch[:i]:
+                        newest(data)
+                break
+        return n
 
     def set_deadline(self, when: float | None, callback: Callable[[], None] | None = None
                      ) -> None:
@@ -170,7 +204,8 @@ class HotLoop:
     # ------------------------------------------------------------------ spinning
     def _rebuild(self) -> None:
         node = self.node
-        self._handles = [(s.handle, s.handle.pointer, t, cb, s.topic_name)
+        self._handles = [(s.handle, s.handle.pointer, t, cb, s.topic_name,
+                          self._newest.get(id(s)))
                          for s, t, cb in self._subs if id(s) not in self._sleeping]
         self._others = ([s.handle for s in node.services], [c.handle for c in node.clients],
                         [t.handle for t in node.timers])
@@ -191,7 +226,7 @@ class HotLoop:
         timeout = min(timeout, self._next_service - now)
         ws = self._wait_set
         ws.clear_entities()
-        for h, _, _, _, _ in handles:
+        for h, _, _, _, _, _ in handles:
             ws.add_subscription(h)
         services, clients, timers = self._others
         for h in services:
@@ -206,16 +241,9 @@ class HotLoop:
             tr.wake()
         ready = ws.get_ready_entities('subscription')
         if ready:
-            for h, ptr, msg_type, cb, topic in handles:
+            for h, ptr, msg_type, cb, topic, newest in handles:
                 if ptr in ready:
-                    while True:
-                        t0 = time.time_ns() if tr is not None else 0
-                        taken = h.take_message(msg_type, True)
-                        if taken is None:
-                            break
-                        if tr is not None:
-                            tr.taken(topic, t0, taken[0], taken[1])
-                        cb(taken[0])
+                    self._take(h, msg_type, cb, topic, newest)
                     if self._wait_set is None:  # a callback changed the subscriptions
                         break
         run_executor = bool(ws.get_ready_entities('service') or ws.get_ready_entities('client')
