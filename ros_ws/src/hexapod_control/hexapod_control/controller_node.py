@@ -9,9 +9,9 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 (default true) the node configures and activates itself at start, so no lifecycle manager
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
-Per tick: the newest ``/hexapod/joint_states`` message, if its header.frame_id names this
-controller (``hexapod_sim.core.labels.in_charge``), is answered once the reference and the
-foot forces with the same stamp are there (both architectures wait for the same set, so
+Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
+(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces
+with the same stamp are there (both architectures wait for the same set, so
 their timing is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
 :func:`hexapod_control.core.closed_loop.run_ticks` computes it, published on
@@ -22,21 +22,14 @@ controller that is not in charge costs one wake-up per tick and is ready to take
 any tick boundary. Every input goes through the guard (``hexapod_sim.runtime.input_guard``) and
 every command is signed with the run's key.
 
-A controller that is not in charge does not wake at every state: it takes its queued states,
-foot forces and references every ``IDLE_DRAIN`` s (checking only the newest state, and only
-the inputs from that tick on), so the graph's two cores are not shared with a controller
-that has nothing to do. It wakes at once when ``/hexapod/active_controller`` (published by
-the sim at the tick boundary of a switch, before the first state that names the new
-controller) names it, or when a drained state does, and answers from that state on.
-
-Only the newest state is answered. In lockstep the sim sends the next state only after the
-command (or the timeout), so every state is the newest; in realtime a controller that fell
-behind (states queued at a wake-up, or a state still waiting for its inputs when a newer one
-comes) skips the older states, which are past their deadline, instead of answering them one
-by one and staying behind: answering a backlog in order once kept a controller 10-50 ticks
-late for tens of ms. Skipped states (authenticated only, so that a replayed copy is still
-refused) and the inputs of older ticks (not checked: they would not be used) are counted
-(``superseded`` in the status and the end summary).
+A controller that is not in charge still wakes at every state (the first state that names it
+after a switch must find it awake), but takes its queued foot forces and references only
+every ``IDLE_DRAIN`` s, checking only those from the newest state's tick on: at a switch it
+then has at most a few ms of inputs to take in.
+Every state of ours is answered, in order, late rather than never (answering only the
+newest state was tried: at the same share of on-time ticks it left ticks unanswered at
+switches). Inputs of ticks before every state still to answer are not needed: they are
+skipped unchecked and counted (``superseded`` in the status and the end summary).
 """
 from __future__ import annotations
 
@@ -50,7 +43,7 @@ from hexapod_sim.core import topics as T
 from hexapod_sim.core import trace as _trace
 from hexapod_sim.core.trace import header_stamp
 from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.params import CONTROLLERS, N_LEGS, HexapodParams
+from hexapod_sim.core.params import N_LEGS, HexapodParams
 from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
@@ -60,7 +53,6 @@ from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 
 from hexapod_sim.runtime import conversions as C
 
@@ -90,7 +82,7 @@ class ControllerNode(LifecycleNode):
         self.status_now = self.guard.publish_status(
             self.get_name(), lambda: self.window.newest or 0,
             extra=lambda: {"lifecycle": self.lifecycle, "superseded": self.superseded_text(),
-                           "in_charge": str(self.hot).lower()})
+                           "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
         self.js_codec = C.CODECS[T.JOINT_STATES]
@@ -100,7 +92,7 @@ class ControllerNode(LifecycleNode):
         self.pub: Any = None
         self.subs: dict[str, Any] = {}
         self.active = False
-        self.hot = True  # in charge as far as we know: woken by every state
+        self.in_charge = False  # named by the newest state
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
         # States of ours waiting for their reference or foot forces (answered, in order, as
@@ -112,9 +104,8 @@ class ControllerNode(LifecycleNode):
         self.demand = np.zeros((N_LEGS, 2))
         self.answered = 0
         self.waited = 0  # states whose reference or foot forces came after them
-        self.given_up = 0  # states of ours not answered: a newer state came first
         self.skipped_inputs = 0  # references and foot forces of ticks before the newest state
-        self.input_floor = -1  # stamp of the newest state: inputs before it are not needed
+        self.input_floor = -1  # inputs of ticks before it are not needed (no state to answer)
         self._load_gains(self.binding.params)
         self.period_ns = int(round(self.binding.params.sim.control_period * 1e9))
         self._law()  # warm up the compiled law before the first tick
@@ -150,9 +141,6 @@ class ControllerNode(LifecycleNode):
         self.subs[T.FOOT_FORCES] = self.loop.subscribe(
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
-        self.subs[T.ACTIVE_CONTROLLER] = self.loop.subscribe(
-            String, T.ACTIVE_CONTROLLER, self._on_announce,
-            C.TOPIC_QOS[T.ACTIVE_CONTROLLER].subscriber(10))
         self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
                       f"{tuple(float(g) for g in self.gains)}")
         self._entered("inactive")
@@ -168,10 +156,7 @@ class ControllerNode(LifecycleNode):
         if T.JOINT_STATES not in self.subs:
             self.subs[T.JOINT_STATES] = self.loop.subscribe(
                 JointState, T.JOINT_STATES, self._on_state,
-                C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH), wake=self.hot,
-                newest=lambda data: self.guard.payload(T.JOINT_STATES, data))
-            if not self.hot:
-                self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
+                C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
         self.active = True
         self.log.info("active: answering the states that name "
                       f"'{self.arch}' as the controller in charge")
@@ -215,41 +200,18 @@ class ControllerNode(LifecycleNode):
         self._entered("finalized")
         return TransitionCallbackReturn.SUCCESS
 
-    # ------------------------------------------------------------------ in charge or idle
-    def _set_hot(self, hot: bool) -> None:
-        """In charge (woken by every state) or idle (drained every IDLE_DRAIN s)."""
-        if hot == self.hot:
-            return
-        self.hot = hot
-        sub = self.subs.get(T.JOINT_STATES)
-        if sub is None:
-            return
-        self.loop.set_wake(sub, hot)
-        self.loop.set_deadline(None if hot else time.monotonic() + IDLE_DRAIN,
-                               None if hot else self._drain)
-
-    def _on_announce(self, data: bytes) -> None:
-        """``/hexapod/active_controller``: wake up if it names us, else go idle."""
-        got = self.guard.string(T.ACTIVE_CONTROLLER, data, CONTROLLERS)
-        if got is not None:
-            self._set_hot(got[1] == self.arch)
-
     def _drain(self) -> None:
-        """Idle: take the queued states (the newest is checked: it may name us) and, with
-        it, the inputs; then again in IDLE_DRAIN s."""
-        sub = self.subs.get(T.JOINT_STATES)
-        if sub is None or self.hot:
-            return
-        self.loop.take(sub)
-        if not self.hot:
-            self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
+        """Not in charge: take the queued references and foot forces (those of ticks before
+        the newest state are skipped unchecked)."""
+        for topic in (T.REFERENCE, T.FOOT_FORCES):
+            sub = self.subs.get(topic)
+            if sub is not None:
+                self.loop.take(sub)
 
     # ------------------------------------------------------------------ per tick
     def superseded_text(self) -> str:
-        """States skipped for a newer one, states given up, inputs of older ticks skipped."""
-        skipped = self.loop.superseded.get(T.JOINT_STATES, 0)
-        return (f"{skipped} states skipped at a wake-up, {self.given_up} waiting states given "
-                f"up, {self.skipped_inputs} inputs of older ticks not taken in")
+        """Inputs of ticks that no state to answer needs, skipped unchecked."""
+        return f"{self.skipped_inputs} inputs of older ticks not taken in"
 
     def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
         """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED);
@@ -272,45 +234,40 @@ class ControllerNode(LifecycleNode):
     def _on_forces(self, data: bytes) -> None:
         self._on_input(T.FOOT_FORCES, self.forces, data)
 
-    def _on_state(self, data: bytes) -> bool:
-        """A state: ours to answer if it names this controller (and we are active); False
-        if the guard dropped it (the hot loop then offers the next older one).
+    def _on_state(self, data: bytes) -> None:
+        """A state: ours to answer if it names this controller (and we are active).
 
         Reference and foot forces do not wake the loop (hot_loop.py): they queue in their
-        subscriptions (``conversions.CONTROL_DEPTH`` deep) and are taken here, at every state, also
-        while another controller is in charge: so the buffers hold the current tick's inputs
-        whenever a state names this controller, however far the process lagged (a switch
-        then costs no more than any tick). Only if an input is still missing does it wake
-        the loop until it is there.
+        subscriptions (``conversions.CONTROL_DEPTH`` deep) and are taken here at every state
+        that names this controller, and every IDLE_DRAIN s while another one is in charge:
+        so the queues hold at most a few ms of inputs when a state names this controller (a
+        switch then costs little more than any tick). Only if an input is still missing
+        does it wake the loop until it is there.
         """
         js = self.guard.joint_state(T.JOINT_STATES, data, self.period_ns, self.window,
                                     advance=True)
         if js is None:
-            return False
+            return
         stamp = js.stamp_ns
-        self.input_floor = stamp
-        for old in [s for s in self.pending if s < stamp]:  # past their deadline
-            del self.pending[old]
-            self.given_up += 1
-        if T.REFERENCE in self.subs:
+        self.input_floor = min(self.pending, default=stamp)
+        mine = self.in_charge = in_charge(js.frame_id) == self.arch and self.active
+        if mine and T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
-        named = in_charge(js.frame_id)
-        mine = named == self.arch and self.active
-        if mine and not self.hot:
-            self._set_hot(True)
-        elif named != self.arch and named in CONTROLLERS and self.hot:
-            self._set_hot(False)
+        elif self.loop.deadline is None:  # not ours: its inputs can wait a few ms
+            self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
         if mine:
             self.last_state = stamp
             self.pending[stamp] = js
+            if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give up the oldest
+                del self.pending[min(self.pending)]
             self._answer()
             if self.pending:  # an input is late: let it wake us
                 self.waited += 1
                 self.loop.set_wake(self.subs[T.REFERENCE], True)
                 self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
         # After the command is out (off the round trip): take the next tick's reference if
-        # it is there already (the generator publishes it one tick ahead), so that the next
+        # it is there already (the generator publishes ahead of the states), so that the next
         # state finds it checked; forget the inputs of answered ticks.
         if mine and T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
@@ -318,7 +275,6 @@ class ControllerNode(LifecycleNode):
         for buf in (self.refs, self.forces):
             for s in [s for s in buf if s < keep]:
                 del buf[s]
-        return True
 
     def _answer(self) -> None:
         """Compute and publish the command of each pending state whose inputs are there."""
