@@ -160,10 +160,12 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
             due = start + (i + 1) * args.every
             time.sleep(max(0.0, due - time.monotonic()))  # the bench process sleeps between
             if args.via == "tool":
+                if g.procs["hexapod_sim"].poll() is not None:
+                    break  # the run is over: the tool calls were slower than --every
                 done = subprocess.run([str(ROOT / "scripts" / "switch_controller.sh"), target],
                                       env={**os.environ, "ROS_DOMAIN_ID": str(domain)},
                                       capture_output=True, text=True, timeout=60)
-                if done.returncode:
+                if done.returncode and g.procs["hexapod_sim"].poll() is None:
                     raise RuntimeError(f"switch_controller.sh {target}: {done.stderr.strip()}"
                                        f"\n--- the sim's log:\n{g.log('hexapod_sim')[-3000:]}")
             else:
