@@ -393,6 +393,8 @@ def test_node_started_by_hand_refuses_a_misspelt_params_file(make_graph, tmp_pat
     ("markers", "startup_timeout:=-1.0", "parameter 'startup_timeout' = -1.0 is invalid"),
     ("metrics", "reorder_window:=-0.5", "parameter 'reorder_window' = -0.5 is invalid"),
     ("trajectory_generator", "lookahead:=-2", "parameter 'lookahead' = -2 is invalid"),
+    ("trajectory_generator", "publish_interval:=-0.1",
+     "parameter 'publish_interval' = -0.1 is invalid: allowed float in [0, 1]"),
     ("hexapod_sim", "switch_to:=pd_x", "parameter 'switch_to' = 'pd_x' is invalid"),
     ("foxglove_bridge", "port:=70000", "parameter 'port' = 70000 is invalid"),
 ])
