@@ -187,6 +187,7 @@ CLI_ONLY = [
     (["sweep", "ground", "--range=10:5:3"], "argument --range: '10:5:3': HI = 5 is below"),
     (["sweep", "tmax", "--t-max-list", "400,x"], "argument --t-max-list: '400,x' is not"),
     (["switch", "pd_p", "--timeout=nan"], "argument --timeout: 'nan' is not a timeout (s)"),
+    (["switch", "pd_x"], "argument controller: invalid choice: 'pd_x'"),
     (["status", "--timeout", "-1"], "argument --timeout: '-1' is not a timeout (s)"),
 ]
 

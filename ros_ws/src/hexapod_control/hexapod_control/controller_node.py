@@ -29,7 +29,7 @@ then has at most a few ms of inputs to take in.
 Every state of ours is answered, in order, late rather than never (answering only the
 newest state was tried: at the same share of on-time ticks it left ticks unanswered at
 switches). Inputs of ticks before every state still to answer are not needed: they are
-skipped unchecked and counted (``superseded`` in the status and the end summary).
+skipped unchecked and counted (``skipped_inputs`` in the status and the end summary).
 """
 from __future__ import annotations
 
@@ -81,7 +81,8 @@ class ControllerNode(LifecycleNode):
         self.lifecycle = "unconfigured"
         self.status_now = self.guard.publish_status(
             self.get_name(), lambda: self.window.newest or 0,
-            extra=lambda: {"lifecycle": self.lifecycle, "superseded": self.superseded_text(),
+            extra=lambda: {"lifecycle": self.lifecycle,
+                           "skipped_inputs": str(self.skipped_inputs),
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
@@ -209,10 +210,6 @@ class ControllerNode(LifecycleNode):
                 self.loop.take(sub)
 
     # ------------------------------------------------------------------ per tick
-    def superseded_text(self) -> str:
-        """Inputs of ticks that no state to answer needs, skipped unchecked."""
-        return f"{self.skipped_inputs} inputs of older ticks not taken in"
-
     def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
         """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED);
         one of a tick before the newest state is not needed, and not even checked."""
@@ -321,7 +318,8 @@ def _start(node: ControllerNode) -> None:
 
 def _finish(node: ControllerNode, code: int) -> int:
     node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                  f"their reference or foot forces; superseded: {node.superseded_text()}); "
+                  f"their reference or foot forces; {node.skipped_inputs} inputs of ticks no state "
+                  f"needed skipped unchecked); "
                   f"inputs: {node.guard.summary()}")
     if node.pub is not None:
         node.pub.wait_for_all_acked(Duration(seconds=1))

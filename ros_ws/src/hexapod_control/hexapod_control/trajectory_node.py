@@ -122,7 +122,9 @@ class TrajectoryNode(Node):
 
 
 def _finish(node: TrajectoryNode, code: int) -> int:
-    node.log.info(f"stopping; inputs: {node.guard.summary()}")
+    skipped = node.loop.superseded.get(T.JOINT_STATES, 0)
+    node.log.info(f"stopping; {skipped} states superseded by a newer one at a take; inputs: "
+                  f"{node.guard.summary()}")
     node.pub.wait_for_all_acked(Duration(seconds=1))
     return code
 
