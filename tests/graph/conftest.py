@@ -76,14 +76,15 @@ def sim_summary(log: str) -> dict[str, float]:
 RECORDED_RUN = ("trajectory_generator", "pd_pf_controller", "metrics")
 
 
-def start_recorded_run(g: GraphProcesses, bag: Path, duration: float) -> None:
+def start_recorded_run(g: GraphProcesses, bag: Path, duration: float,
+                       also_wait_for: tuple[str, ...] = ()) -> None:
     """Recorder (into ``bag``), trajectory generator, PD-P&F and a sim that stops after
-    ``duration`` simulated s."""
+    ``duration`` simulated s (tick 0 once those and ``also_wait_for``'s nodes are there)."""
     g.start("metrics", f"bag_path:={bag}")
     g.start("trajectory_generator")
     g.start("pd_pf_controller")
     g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
-            f"wait_for:={','.join(RECORDED_RUN)}")
+            f"wait_for:={','.join(RECORDED_RUN + also_wait_for)}")
 
 
 def finish_recorded_run(g: GraphProcesses, timeout: float) -> dict[str, float]:
@@ -103,6 +104,10 @@ def hexapod_cli(domain_id: int, *args: str, timeout: float = 120) -> subprocess.
                           capture_output=True, text=True, timeout=timeout)
 
 
+#: The name of :func:`ros_client`'s node (one per test process; each test has its domain).
+CLIENT_NODE = f"graph_test_{os.getpid()}"
+
+
 @contextlib.contextmanager
 def ros_client(domain_id: int) -> Iterator[Any]:
     """An rclpy node on ``domain_id`` in this process (own context), destroyed afterwards."""
@@ -110,7 +115,7 @@ def ros_client(domain_id: int) -> Iterator[Any]:
 
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain_id)
-    node = rclpy.create_node(f"graph_test_{os.getpid()}", context=ctx,
+    node = rclpy.create_node(CLIENT_NODE, context=ctx,
                              start_parameter_services=False)
     try:
         yield node

@@ -17,13 +17,16 @@ from hexapod_metrics.core.recording import RECORDS_KEY
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import O_TH, O_TQ
 
-from .conftest import call, fast_params, finish_recorded_run, ros_client, start_recorded_run
+from .conftest import CLIENT_NODE, call, fast_params, finish_recorded_run, ros_client, start_recorded_run
 
 DURATION = 4.0
 
 
-def _wait_sim_time(node, seconds: float, timeout: float = 120.0) -> float:
-    """Spin ``node`` until a /clock of at least ``seconds`` arrived; that time."""
+def _clock_watch(node):
+    """A best-effort /clock subscription on ``node``; returns ``wait(seconds)``, which spins
+    until a /clock of at least ``seconds`` arrived. Made before the sim starts (the sim
+    waits for the client node and matches this subscription before tick 0), so a fast run
+    cannot be over before the client hears it."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
@@ -32,14 +35,17 @@ def _wait_sim_time(node, seconds: float, timeout: float = 120.0) -> float:
     node.create_subscription(
         Clock, T.CLOCK, lambda m: seen.__setitem__(0, m.clock.sec + m.clock.nanosec * 1e-9),
         QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
-    ex = SingleThreadedExecutor(context=node.context)
-    ex.add_node(node)
-    end = time.monotonic() + timeout
-    while seen[0] < seconds and time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.05)
-    ex.remove_node(node)
-    assert seen[0] >= seconds, f"sim time stayed at {seen[0]} s"
-    return seen[0]
+
+    def wait(seconds: float, timeout: float = 120.0) -> float:
+        ex = SingleThreadedExecutor(context=node.context)
+        ex.add_node(node)
+        end = time.monotonic() + timeout
+        while seen[0] < seconds and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        ex.remove_node(node)
+        assert seen[0] >= seconds, f"sim time stayed at {seen[0]} s"
+        return seen[0]
+    return wait
 
 
 def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engine(
@@ -49,11 +55,12 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
 
     bag = tmp_path / "bag"
     g = make_graph()
-    start_recorded_run(g, bag, DURATION)
     with ros_client(g.domain_id) as node:
+        wait_sim_time = _clock_watch(node)
+        start_recorded_run(g, bag, DURATION, also_wait_for=(CLIENT_NODE,))
         # The live change first, while the 4 s run surely goes on (a loaded machine may
         # take longer over the hostile part than the run lasts).
-        _wait_sim_time(node, 1.0)
+        wait_sim_time(1.0)
         value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=2.0)
         req = SetParameters.Request(parameters=[Parameter(name="ground.scale", value=value)])
         res = call(node, SetParameters, "/hexapod_sim/set_parameters", req).results[0]
