@@ -11,10 +11,11 @@ S5: realtime mode, 1 kHz, all five nodes: percentage of ticks whose command arri
 Each run starts a fresh graph on its own ROS_DOMAIN_ID and prints the CPU seconds every
 node used, so a slow figure says where the time went.
 
-With --rt (experimental) the sim, the controllers and the trajectory generator run with
-real-time scheduling (``chrt -f 10``, needs the privilege). Measured here: lockstep 1.9x
-real time and, in realtime mode, 100 % of ticks on time in some runs but a collapse
-(starved recorder and DDS threads, ~40 % on time) in others; so it is not a default.
+S5 runs the control path (the sim's and the controllers' main and Fast DDS receive threads)
+under SCHED_FIFO at --rt-priority (default 20, what ``run_graph.sh --mode realtime`` uses;
+0 = normal scheduling, to measure without it); S4 (lockstep) runs with normal scheduling
+unless --s4-rt-priority says otherwise. Without the privilege the nodes say so and run
+normally, and this script prints it.
 
 Each run first measures how much of a core a busy loop gets for 1 s: the machine is
 shared with load that ps does not show, and the figures move with it.
@@ -29,7 +30,7 @@ untraced ones: take S4's figure from a run without it. --auth off runs the graph
 message authentication (to measure what it costs).
 
 Usage: scripts/bench_graph.py [--runs 3] [--duration 10] [--only s4|s5] [--rates 1000,2000]
-       [--rt] [--breakdown] [--auth on|off]
+       [--rt-priority 20] [--s4-rt-priority 0] [--breakdown] [--auth on|off]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
@@ -38,7 +39,6 @@ import argparse
 import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -54,15 +54,14 @@ NODES = ("metrics", "trajectory_generator", "pd_p_controller", "pd_pf_controller
 CPU_COLUMNS = ("hexapod_sim",) + NODES
 
 
-RT_PREFIX = ("chrt", "-f", "10")
-
-
-def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool = False,
+def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priority: int = 0,
               rate: float = 1000.0, trace_dir: Path | None = None, auth: str = "on"
               ) -> dict[str, float]:
-    """One graph run at control rate ``rate`` (Hz); the sim's summary figures and each
-    node's CPU seconds; with ``trace_dir`` every node writes its trace there."""
-    from hexapod_metrics.cmd_graph import GraphProcesses
+    """One graph run at control rate ``rate`` (Hz), the control path under SCHED_FIFO at
+    ``rt_priority`` (0: normal scheduling); the sim's summary figures, each node's CPU
+    seconds and whether every control-path node got SCHED_FIFO; with ``trace_dir`` every
+    node writes its trace there."""
+    from hexapod_metrics.cmd_graph import RT_NODES, GraphProcesses
     from hexapod_sim.core.msg_auth import AUTH_ENV
     from hexapod_sim.core.trace import TRACE_ENV
 
@@ -70,14 +69,14 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool =
     if trace_dir is not None:
         trace_dir.mkdir(parents=True, exist_ok=True)
         env[TRACE_ENV] = str(trace_dir)
-    g = GraphProcesses(log_dir, env=env, overrides=(f"sim.control_period:={1.0 / rate!r}",))
-    prefix = RT_PREFIX if rt else ()
+    g = GraphProcesses(log_dir, env=env, overrides=(f"sim.control_period:={1.0 / rate!r}",),
+                       rt_priority=rt_priority)
     try:
         g.start("metrics", f"bag_path:={log_dir / 'bag'}")
         for name in NODES[1:]:
-            g.start(name, prefix=prefix)
+            g.start(name)
         g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
-                f"sim.mode:={mode}", prefix=prefix)
+                f"sim.mode:={mode}")
         g.wait_log("hexapod_sim", "real-time factor", timeout=duration * 20 + 120)
         cpu = {n: g.cpu_seconds(n) for n in NODES}
         try:
@@ -93,7 +92,9 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt: bool =
         raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
     ticks, missed, late, on_time = (int(x) for x in m.groups()[:4])
     rt = re.search(r"round trip median ([\d.na]+) ms, p99 ([\d.na]+) ms", g.log("hexapod_sim"))
-    return {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
+    granted = all(f"rt_priority {rt_priority}: SCHED_FIFO" in g.log(n) for n in RT_NODES)
+    return {"rt": rt_priority if granted else 0,
+            "ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
             "rt_median": float(rt.group(1)) if rt else float("nan"),
             "rt_p99": float(rt.group(2)) if rt else float("nan"),
             "wall": float(m.group(5)), "rtf": float(m.group(6)), **{f"cpu_{n}": c for n, c
@@ -132,19 +133,18 @@ def main() -> int:
     ap.add_argument("--only", choices=("s4", "s5"))
     ap.add_argument("--rates", default="1000,2000,5000,10000",
                     help="S4: control rates in Hz, comma-separated (S5 runs at 1 kHz)")
-    ap.add_argument("--rt", action="store_true",
-                    help="real-time scheduling (chrt -f 10) for all nodes but the recorder")
+    ap.add_argument("--rt-priority", type=int, default=20, dest="rt_priority",
+                    help="S5: SCHED_FIFO priority of the control path (0 = normal scheduling)")
+    ap.add_argument("--s4-rt-priority", type=int, default=0, dest="s4_rt_priority",
+                    help="S4: the same for the lockstep runs (default 0)")
     ap.add_argument("--breakdown", action="store_true",
                     help="S4: trace every node and print where each tick's time goes")
     ap.add_argument("--auth", choices=("on", "off"), default="on",
                     help="message authentication of the graph (default on)")
     args = ap.parse_args()
-    if args.rt and subprocess.run([*RT_PREFIX, "true"], capture_output=True).returncode:
-        ap.error("--rt: chrt -f 10 is not permitted here (needs CAP_SYS_NICE)")
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, "
-          f"authentication {args.auth}"
-          + (", real-time scheduling (chrt -f 10) for sim, controllers, trajectory" if args.rt
-             else ", default scheduling (recorder at nice 10)"))
+          f"authentication {args.auth}, recorder at nice 10; control path under SCHED_FIFO "
+          f"{args.s4_rt_priority} in S4, {args.rt_priority} in S5 (0 = normal scheduling)")
     base = 150 + os.getpid() % 80
     with tempfile.TemporaryDirectory(prefix="bench_graph_") as tmp:
         rates = [float(x) for x in args.rates.split(",")]
@@ -157,13 +157,15 @@ def main() -> int:
                 avail = cpu_available()
                 run_dir = Path(tmp) / f"{key}_{j}_{i}"
                 traced = args.breakdown and key == "s4"
+                prio = args.rt_priority if key == "s5" else args.s4_rt_priority
                 r = run_graph(mode, args.duration, (base + 7 * j + i) % 101 + 1, run_dir,
-                              args.rt, rate, run_dir / "trace" if traced else None, args.auth)
+                              prio, rate, run_dir / "trace" if traced else None, args.auth)
                 rows.append(r)
                 cpu = ", ".join(f"{n} {r['cpu_' + n]:.1f}" for n in CPU_COLUMNS)
                 print(f"{key} {rate / 1000:g} kHz run {i + 1} (a busy loop got "
                       f"{100 * avail:.0f} % of a core just "
-                      f"before): {r['ticks']} ticks, wall {r['wall']:.2f} s, "
+                      f"before; SCHED_FIFO {r['rt'] or 'no'}): {r['ticks']} ticks, "
+                      f"wall {r['wall']:.2f} s, "
                       f"real-time factor {r['rtf']:.3f}, missed {r['missed']}, late "
                       f"{r['late']}, on time {r['on_time']}, round trip median "
                       f"{r['rt_median']:.2f} ms p99 {r['rt_p99']:.2f} ms; CPU s: {cpu}",

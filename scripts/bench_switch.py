@@ -12,7 +12,9 @@ command of the controller named in the state answered (late or not): a switch wi
 such tick *lost a tick*. It also prints the share of ticks whose command arrived within
 its period, with and without switching.
 
---hog adds one CPU hog (a busy loop in its own process) beside the graph.
+--hog adds one CPU hog (a busy loop in its own process) beside the graph. The control path
+runs under SCHED_FIFO at --rt-priority (default 20, as ``run_graph.sh --mode realtime``
+sets it; 0 = normal scheduling).
 
 --kill-idle S runs two graphs without switches side by side in time (one after the other)
 and kills the idle controller (SIGKILL) S wall seconds into the second one; from the sim's
@@ -20,7 +22,7 @@ status messages in each bag it prints the share of on-time ticks before and afte
 moment, so a dead idle controller's cost shows against the same run without a kill.
 
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
-       [--via service|tool]
+       [--rt-priority 20] [--via service|tool]
        [--no-baseline] [--kill-idle S]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
@@ -122,7 +124,8 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     duration = args.every * (switches + 1) if switches else args.duration
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
                        overrides=(f"sim.dt:={args.dt}", f"sim.control_period:={args.period}",
-                                  f"sim.mode:={args.mode}"))
+                                  f"sim.mode:={args.mode}"),
+                       rt_priority=args.rt_priority)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = rclpy.create_node("bench_switch", context=ctx, start_parameter_services=False)
@@ -145,8 +148,10 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
             g.start(name)
         g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
                 f"wait_for:={ALL}")
-        g.wait_log("hexapod_sim", f"{args.mode} mode", timeout=180)
+        # The service first (it exists before tick 0): its discovery can take a second,
+        # which must not delay the switch schedule behind the run.
         assert client.wait_for_service(timeout_sec=60), "no /hexapod_sim/set_parameters"
+        g.wait_log("hexapod_sim", f"{args.mode} mode", timeout=180)
         start = time.monotonic()
         kill_tick = None
         if kill_idle is not None:
@@ -207,6 +212,9 @@ def main() -> int:
     ap.add_argument("--dt", type=float, default=1e-4, help="physics step (s)")
     ap.add_argument("--duration", type=float, default=10.0, help="s of the run without switches")
     ap.add_argument("--hog", action="store_true", help="one CPU hog beside the graph")
+    ap.add_argument("--rt-priority", type=int, default=20, dest="rt_priority",
+                    help="SCHED_FIFO priority of the control path, as run_graph.sh --mode "
+                    "realtime sets it (0 = normal scheduling)")
     ap.add_argument("--via", choices=("service", "tool"), default="service",
                     help="how to switch: the sim's set_parameters service from this process "
                     "(default), or scripts/switch_controller.sh, a new process per switch")
@@ -222,7 +230,8 @@ def main() -> int:
         hog = multiprocessing.Process(target=_hog, daemon=True)
         hog.start()
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
-          f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz; "
+          f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz, "
+          f"control path under SCHED_FIFO {args.rt_priority} (0 = normal scheduling); "
           f"switching through {'switch_controller.sh' if args.via == 'tool' else 'set_parameters'}")
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:

@@ -165,6 +165,11 @@ GRAPH_ONLY = [
     (["--controller", "pd_x"], "argument --controller: invalid choice: 'pd_x'"),
     (["--mode=fast"], "argument --mode: invalid choice: 'fast'"),
     (["--duration"], "argument --duration: expected one argument"),
+    (["--rt-priority", "99"], "argument --rt-priority: '99' is not a SCHED_FIFO priority in "
+     "[0, 98]"),
+    (["--rt-priority=abc"], "argument --rt-priority: 'abc' is not a SCHED_FIFO priority"),
+    (["--rt-priority", "1.5"], "argument --rt-priority: '1.5' is not a SCHED_FIFO priority "
+     "(an integer in [0, 98])"),
 ]
 
 

@@ -58,6 +58,27 @@ def test_diagnostics_round_trip():
     assert C.from_time(msg.header.stamp) == 5
 
 
+@pytest.mark.parametrize("statuses", [
+    [],
+    [C.Status("hexapod_sim", "error", "fallback", {"tick": "7"})],
+    [C.Status("a", "ok", "", {}), C.Status("metrics", "warn", "dropped 3 ünïcode",
+                                           {"k1": "v", "k22": "", "": "x" * 33}, "hw")],
+])
+def test_raw_diagnostic_arrays_are_rclpys_bytes(statuses):
+    from rclpy.serialization import serialize_message
+
+    from hexapod_sim.core.cdr import cdr_padding_mask
+
+    ours = C.encode_statuses(1_234_567_891, statuses)
+    theirs = serialize_message(C.diagnostic_array(1_234_567_891, statuses))
+    assert len(ours) == len(theirs)
+    # rclpy leaves padding bytes uninitialised: equal everywhere else
+    mask = cdr_padding_mask(theirs, T.DIAGNOSTIC_ARRAY)
+    assert mask == cdr_padding_mask(ours, T.DIAGNOSTIC_ARRAY)
+    assert all(a == b for a, b, m in zip(ours, theirs, mask) if not m)
+    assert all(b == 0 for b, m in zip(ours, mask) if m)
+
+
 def test_fill_obs_is_the_inverse_of_state_columns():
     obs = np.random.default_rng(1).standard_normal((9, 6, 2))
     out = np.zeros_like(obs)

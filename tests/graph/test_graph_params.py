@@ -17,7 +17,8 @@ from hexapod_metrics.core.recording import RECORDS_KEY
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.layout import O_TH, O_TQ
 
-from .conftest import CLIENT_NODE, call, fast_params, finish_recorded_run, ros_client, start_recorded_run
+from .conftest import (CLIENT_NODE, call, fast_params, finish_recorded_run, ros_client,
+                       start_recorded_run)
 
 DURATION = 4.0
 

@@ -49,6 +49,7 @@ from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
 from hexapod_sim.runtime.param_topic import ParamAnnouncer
 from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
@@ -76,6 +77,13 @@ class ControllerNode(LifecycleNode):
         self.window = M.StampWindow(increasing=True)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.autostart = declare_node_param(self, "autostart")
+        # SCHED_FIFO for the control path when asked (the launcher does in realtime mode):
+        # at rt_priority while in charge, one below while idle, so that the controller in
+        # charge (and the sim) come first when both controllers wake at the same state.
+        self.rt = use_rt_priority(self, self.log)
+        self.rt_priority = self.rt.priority if self.rt is not None else 0
+        if self.rt is not None:
+            self.rt.set(self._idle_priority())
         # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
         # /hexapod/status, so the bag records it with the sim time it happened at.
         self.lifecycle = "unconfigured"
@@ -247,7 +255,10 @@ class ControllerNode(LifecycleNode):
             return
         stamp = js.stamp_ns
         self.input_floor = min(self.pending, default=stamp)
-        mine = self.in_charge = in_charge(js.frame_id) == self.arch and self.active
+        mine = in_charge(js.frame_id) == self.arch and self.active
+        if mine != self.in_charge and self.rt is not None:
+            self.rt.set(self.rt_priority if mine else self._idle_priority())
+        self.in_charge = mine
         if mine and T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
@@ -272,6 +283,10 @@ class ControllerNode(LifecycleNode):
         for buf in (self.refs, self.forces):
             for s in [s for s in buf if s < keep]:
                 del buf[s]
+
+    def _idle_priority(self) -> int:
+        """The SCHED_FIFO priority while another controller is in charge."""
+        return max(1, self.rt_priority - 1)
 
     def _answer(self) -> None:
         """Compute and publish the command of each pending state whose inputs are there."""

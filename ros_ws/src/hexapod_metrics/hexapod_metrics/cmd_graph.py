@@ -54,6 +54,8 @@ NICE = {"metrics": 10, "foxglove_bridge": 10}
 #: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is
 #: off by default.
 SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
+#: The nodes on the control path: ``rt_priority`` (hexapod_sim/runtime/rt_sched.py) is theirs.
+RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller")
 
 
 #: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
@@ -73,6 +75,7 @@ class GraphProcesses:
     ``env`` adds to the current environment (set ``ROS_DOMAIN_ID`` there); every node gets
     ``--params-file params`` if given and its log in ``log_dir/<name>.log``;
     ``use_sim_time`` passes ``use_sim_time:=true`` to the nodes of :data:`SIM_TIME_NODES`;
+    ``rt_priority`` (> 0) passes ``rt_priority:=N`` to the nodes of :data:`RT_NODES`;
     ``overrides`` (``"name:=value"``) go to every node. Unless ``env`` names a key file
     (``HEXAPOD_KEY_FILE``) or turns authentication off, the graph gets a fresh run key
     (``hexapod_sim.core.msg_auth``), removed with this object.
@@ -80,11 +83,12 @@ class GraphProcesses:
 
     def __init__(self, log_dir: str | os.PathLike[str], params: str | None = None,
                  env: dict[str, str] | None = None, use_sim_time: bool = False,
-                 overrides: Sequence[str] = ()) -> None:
+                 overrides: Sequence[str] = (), rt_priority: int = 0) -> None:
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.params = params
         self.use_sim_time = use_sim_time
+        self.rt_priority = int(rt_priority)
         self.overrides = tuple(overrides)
         self.env = {**os.environ, **(env or {})}
         self.env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -123,6 +127,8 @@ class GraphProcesses:
             args += ["--params-file", str(self.params)]
         if self.use_sim_time and node in SIM_TIME_NODES:
             args += ["-p", "use_sim_time:=true"]
+        if self.rt_priority and node in RT_NODES:
+            args += ["-p", f"rt_priority:={self.rt_priority}"]
         for o in self.overrides + overrides:
             args += ["-p", o]
         log = open(self.log_dir / f"{name}.log", "ab")

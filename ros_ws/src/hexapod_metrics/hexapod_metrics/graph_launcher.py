@@ -37,11 +37,12 @@ from typing import Any, Sequence
 import yaml
 
 from hexapod_sim.core.errors import HexapodError
+from hexapod_sim.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
 from hexapod_sim.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                      default_params_path, load_params, read_params_file)
 
 from .cli_args import OneLineParser, control_rate, number, overrides_from_args, param_value
-from .cmd_graph import GraphProcesses
+from .cmd_graph import RT_NODES, GraphProcesses
 
 #: Exit codes of the launcher, one per cause (the first that applies, in this order).
 EXIT_CODES: dict[str, int] = {
@@ -112,6 +113,11 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
     p.add_argument("--no-switch", action="store_true", dest="no_switch",
                    help="keep the first controller all along")
     p.add_argument("--mode", choices=MODES, default="lockstep", help="graph mode")
+    p.add_argument("--rt-priority", dest="rt_priority", type=rt_priority, metavar="N",
+                   help=f"SCHED_FIFO priority of the control path (the sim's and the "
+                   f"controllers' main and DDS receive threads); default "
+                   f"{REALTIME_PRIORITY} in realtime mode, 0 (normal scheduling) in "
+                   f"lockstep; needs CAP_SYS_NICE or an rtprio limit, else a warning")
     p.add_argument("--duration", type=_duration, default=6.0,
                    help="simulated duration in s (default 6); 0 = until Ctrl-C")
     p.add_argument("--ground-scale", dest="ground_scale", type=param_value("ground.scale"),
@@ -155,6 +161,20 @@ def convergence_note(p: HexapodParams) -> str:
                 "5-10 kHz")
     return ("NOT dt-converged in general at this rate (E6): PD-P&F's numbers depend on the "
             "physics step; check with `hexapod converge --control-rate HZ`")
+
+
+#: The control path's SCHED_FIFO priority in realtime mode (hexapod_sim/runtime/rt_sched.py):
+#: low among real-time priorities (the kernel's threaded interrupts run at 50).
+REALTIME_PRIORITY = 20
+
+
+def rt_priority(text: str) -> int:
+    """A SCHED_FIFO priority, 0..98 (0 = normal scheduling)."""
+    value = number(0.0, MAX_PRIORITY, "a SCHED_FIFO priority")(text)
+    if value != int(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a SCHED_FIFO priority (an integer "
+                                         f"in [0, {MAX_PRIORITY}])")
+    return int(value)
 
 
 def port(text: str) -> int:
@@ -259,12 +279,31 @@ class Launcher:
             d += f", {switch_to} from t = {at:g} s"
         return d + (f", {a.duration:g} s" if a.duration > 0 else ", until Ctrl-C")
 
+    def scheduling(self) -> int:
+        """The control path's SCHED_FIFO priority for this run (0: normal scheduling), and
+        one line saying so (or why not)."""
+        a = self.args
+        priority = a.rt_priority
+        if priority is None:
+            priority = REALTIME_PRIORITY if self.p.sim.mode == "realtime" else 0
+        if priority == 0:
+            return 0
+        if not realtime_permitted(priority):
+            print(f"run_graph: warning: SCHED_FIFO priority {priority} is not permitted here "
+                  f"({HOW_TO_PERMIT}): the control path runs with normal scheduling and "
+                  f"realtime mode may miss deadlines", file=sys.stderr, flush=True)
+            return 0
+        print(f"run_graph: control path ({', '.join(RT_NODES)}: main and DDS receive "
+              f"threads) under SCHED_FIFO priority {priority}", flush=True)
+        return priority
+
     def start(self) -> None:
         """Start the nodes (the sim last: it waits for the others' endpoints)."""
         self.bag.parent.mkdir(parents=True, exist_ok=True)
         self.logs.mkdir(parents=True, exist_ok=True)
         self.graph = g = GraphProcesses(self.logs, params=str(self.params_file),
-                                        use_sim_time=self.args.sim_time)
+                                        use_sim_time=self.args.sim_time,
+                                        rt_priority=self.scheduling())
         print(f"run_graph: ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}: "
               f"{self.describe()} (node logs in {self.logs})", flush=True)
         rate = 1.0 / self.p.sim.control_period

@@ -298,7 +298,7 @@ class MetricsNode(Node):
                   "exit_code": str(EXIT_RECORDING_FAILED)}
         status = C.Status("metrics", "error", f"recording stopped: {err}", values)
         self.pub_status.publish(self.guard.signed(self.guard.signer(T.STATUS),
-                                                  C.diagnostic_array(self.clock_ns, [status])))
+                                                  C.encode_statuses(self.clock_ns, [status])))
         self.pub_status.wait_for_all_acked(Duration(seconds=2))
         self.log.error(f"recording stopped at sim time {self.clock_ns * 1e-9:.3f} s: {err}")
 

@@ -16,13 +16,12 @@ from __future__ import annotations
 import os
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.node import Node
+from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -43,6 +42,7 @@ from .runtime.input_guard import InputGuard
 from .runtime.node_main import run_node
 from .runtime.param_topic import ParamAnnouncer
 from .runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from .runtime.rt_sched import use_rt_priority
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
@@ -56,6 +56,28 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 }
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
+
+
+class AfterSendLog:
+    """The tick machine's log: what it says at a tick boundary is said once that tick's
+    messages are out (``queue`` is run by :meth:`SimNode._send`): a log line costs tens of
+    microseconds (console and /rosout), which a realtime tick's round trip cannot spare."""
+
+    def __init__(self, log: FastLogger, queue: list[Callable[[], None]]) -> None:
+        self.log = log
+        self.queue = queue
+
+    def info(self, message: str) -> None:
+        """Log at INFO after the send."""
+        self.queue.append(lambda: self.log.info(message))
+
+    def warning(self, message: str) -> None:
+        """Log at WARN after the send."""
+        self.queue.append(lambda: self.log.warning(message))
+
+    def error(self, message: str) -> None:
+        """Log at ERROR after the send."""
+        self.queue.append(lambda: self.log.error(message))
 
 
 class SimNode(Node):
@@ -83,13 +105,19 @@ class SimNode(Node):
             raise ParameterError("switch_at", self.switch_at,
                                  f"a time in [0, run.duration = {end:g}] s")
         self.summary_path = declare_node_param(self, "summary_path")
+        # SCHED_FIFO for the control path when asked (the launcher does in realtime mode).
+        self.rt = use_rt_priority(self, self.log)
         p = self.params
         self.mode = p.sim.mode
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))
         self._warm_up()
         # The tick rules (lockstep/realtime, misses, hold, fallback, switch): core/tick_machine.py
-        self.ticks = TickMachine(Physics(p), lambda: self.params, self.log, self,
+        # What a tick boundary has to say (log lines, the switch announcement, parameter
+        # records) goes out just after that tick's messages: off the round trip.
+        self.after_send: list[Callable[[], None]] = []
+        self.ticks = TickMachine(Physics(p), lambda: self.params,
+                                 AfterSendLog(self.log, self.after_send), self,
                                  stop_at_end=self.stop_at_end)
 
         self.loop = HotLoop(self)
@@ -149,17 +177,23 @@ class SimNode(Node):
         return None
 
     def controller_unready(self, controller: str) -> str:
-        """Why ``controller`` cannot take over at the next tick ('' if it can)."""
+        """Why ``controller`` cannot take over at the next tick ('' if it can).
+
+        Asked of the graph by node (tens of microseconds), not by topic: the endpoint
+        infos by topic cost ~0.3 ms here, which a realtime tick cannot spare."""
         node = f"{controller}_controller"
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         if node not in self.get_node_names():
             return f"{node} is not running on ROS_DOMAIN_ID={domain}"
-        if not any(i.node_name == node for i in
-                   self.get_subscriptions_info_by_topic(T.JOINT_STATES)):
+        try:
+            subs = {t for t, _ in self.get_subscriber_names_and_types_by_node(node, "/")}
+            pubs = {t for t, _ in self.get_publisher_names_and_types_by_node(node, "/")}
+        except NodeNameNonExistentError:  # gone between the two questions
+            return f"{node} is not running on ROS_DOMAIN_ID={domain}"
+        if T.JOINT_STATES not in subs:
             return (f"{node} is not active (no subscription to {T.JOINT_STATES}): activate "
                     f"it first (hexapod switch {controller} does)")
-        if not any(i.node_name == node for i in
-                   self.get_publishers_info_by_topic(T.JOINT_COMMANDS)):
+        if T.JOINT_COMMANDS not in pubs:
             return f"{node} does not publish {T.JOINT_COMMANDS}"
         if (self.pub[T.JOINT_STATES].get_subscription_count()
                 < self.count_subscribers(T.JOINT_STATES)):
@@ -291,6 +325,9 @@ class SimNode(Node):
             self.loop.set_deadline(when, self._on_timeout)
         else:
             self.loop.set_deadline(when, self._on_period_end)
+        todo = self.after_send
+        while todo:
+            todo.pop(0)()
 
     def _on_command(self, data: bytes) -> None:
         if self.ticks.finished:
@@ -329,12 +366,14 @@ class SimNode(Node):
                 self.log.error(f"scripted switch to {to!r} refused: {result.reason}")
 
     def switched(self, tick: int, old: str, new: str) -> None:
-        """Announce the new controller in charge."""
-        self._announce()
+        """Announce the new controller in charge (once the tick is out: the controllers go
+        by the states' frame_id, the recorder by the first state naming the new one)."""
+        self.after_send.append(self._announce)
 
     def ready(self, tick: int) -> None:
-        """Parameter changes announced at their tick; the next tick's messages serialized."""
-        self.announcer.flush(tick)
+        """Parameter changes announced at their tick (once it is out); the next tick's
+        messages serialized."""
+        self.after_send.append(lambda: self.announcer.flush(tick))
         self._prepare()
 
     # ------------------------------------------------------------------ local switch channel
@@ -452,8 +491,8 @@ class SimNode(Node):
 
     def _publish_status(self) -> None:
         self.guard.refresh()
-        msg: DiagnosticArray = C.diagnostic_array(max(self.ticks.stamp, 0), [self.status()])
-        self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], msg))
+        data = C.encode_statuses(max(self.ticks.stamp, 0), [self.status()])
+        self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], data))
 
     def summary(self) -> str:
         """One line: what ran, how many ticks were missed or late."""
@@ -491,6 +530,8 @@ class SimNode(Node):
 
 def _finish(node: SimNode, code: int) -> int:
     """The summary (log, status, ``summary_path``), the last messages acknowledged."""
+    while node.after_send:  # what the last tick boundary had to say
+        node.after_send.pop(0)()
     if node.ticks.started:
         node.log.info(node.summary())
         node._publish_status()

@@ -370,6 +370,9 @@ def _node(kind: type, default: Any, desc: str, lo: float | None = None,
 _TIMEOUT = _node(float, 60.0, "wall s to wait for the nodes named, then start anyway",
                  0.0, 1e6)
 _BATCH = "wall s between two takes of the queued messages"
+_RT = _node(int, 0, "SCHED_FIFO priority of the node's control path: its main thread and "
+            "Fast DDS shared-memory receive threads (0 = normal scheduling; needs "
+            "CAP_SYS_NICE or an rtprio limit, else a warning and normal scheduling)", 0, 98)
 #: Each node's own parameters (read at start, read-only on the node): type, default, range,
 #: meaning. Checked when a params file is read and when the node declares them.
 NODE_PARAMS: dict[str, dict[str, Spec]] = {
@@ -384,13 +387,16 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
         "switch_to": _node(str, "", "controller of the scripted switch ('' = none)",
                            choices=("",) + CONTROLLERS),
         "summary_path": _node(str, "", "write the end summary as JSON to this file ('' = no)"),
+        "rt_priority": _RT,
     },
     "trajectory_generator": {
         "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),
         "publish_interval": _node(float, 0.005, "wall s between two bursts of references "
                                   "(0: a burst at every state)", 0.0, 1.0)},
-    "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start")},
-    "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start")},
+    "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start"),
+                        "rt_priority": _RT},
+    "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start"),
+                         "rt_priority": _RT},
     "metrics": {
         "bag_path": _node(str, "", "bag directory, must not exist ('' = bags/<date-time>)"),
         "batch_interval": _node(float, 0.005, _BATCH, 0.0, 1.0),

@@ -27,6 +27,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
+from ..core import cdr
 from ..core import topics as T
 from ..core.cdr import (
     CODECS,
@@ -164,6 +165,15 @@ def diagnostic_array(stamp_ns: int, statuses: Sequence[Status]) -> DiagnosticArr
         st.values = [KeyValue(key=str(k), value=str(v)) for k, v in s.values.items()]
         msg.status.append(st)
     return msg
+
+
+def encode_statuses(stamp_ns: int, statuses: Sequence[Status]) -> bytes:
+    """The serialized DiagnosticArray of :func:`diagnostic_array` (the same bytes as rclpy's
+    ``serialize_message``), through the project's CDR codec: ~10x faster, which matters
+    for the messages a realtime node sends between ticks (status, parameter records)."""
+    return cdr.encode_diagnostic_array(stamp_ns, [cdr.DiagnosticStatus(
+        s.name, s.message, s.hardware_id, LEVELS[s.level],
+        tuple((str(k), str(v)) for k, v in s.values.items())) for s in statuses])
 
 
 def statuses(msg: DiagnosticArray) -> list[Status]:

@@ -243,9 +243,8 @@ class InputGuard:
         """A /hexapod/status message of this node's inputs (for non-sim nodes)."""
         self.refresh()
         level = "warn" if self.drops.total or self.key is None else "ok"
-        msg = C.diagnostic_array(max(0, stamp_ns), [C.Status(
+        return C.encode_statuses(max(0, stamp_ns), [C.Status(
             name, level, self.drops.summary(), {**self.values(), **(extra or {})})])
-        return serialize_message(msg)
 
 
 __all__ = ["GRAPH_NODES", "InputGuard", "PUBLISHERS", "SIGNED_TOPICS"]

@@ -70,7 +70,7 @@ class ParamAnnouncer:
         stamp = T.stamp_ns(tick * self.period)
         rec = ParamRecord(self.node.get_name(), kind, tick, stamp, values)
         status = C.Status(f"{RECORD_NAME}/{rec.node}", "ok", kind, rec.to_map())
-        self.pub.publish(self.guard.signed(self.signer, C.diagnostic_array(stamp, [status])))
+        self.pub.publish(self.guard.signed(self.signer, C.encode_statuses(stamp, [status])))
         self.sent += 1
         return rec
 

@@ -1,0 +1,135 @@
+"""Real-time scheduling of a node's control path (the ``rt_priority`` node parameter).
+
+In realtime mode a tick's command must be back within one control period (1 ms at 1 kHz):
+the state goes out, the controller wakes, computes and answers, the sim wakes and applies
+it. Each hop wakes two threads: Fast DDS's shared-memory receive thread of the reading
+process (it takes the sample off the port and signals the wait set), then the node's main
+thread. On a 2-core machine running the five nodes (about 1.4 cores busy), a woken thread
+waited 1-2 ms for a core often enough that only 83-89 % of ticks were on time, whatever the
+nodes' own costs (docs/benchmarks.md). What real-time ROS 2 control does (ros2_control's
+controller manager, the ROS 2 real-time guides) fixes it: the threads of the control path
+run under ``SCHED_FIFO``, so a waking one preempts everything else at once: 99 % on time on
+the same machine, also while switching.
+
+:func:`make_realtime` puts this process's main thread and its Fast DDS shared-memory
+receive threads (``dds.shm.<port>``; not the watchdog) under ``SCHED_FIFO`` at a priority.
+Only those: Fast DDS's event thread (heartbeats, timers) and the other nodes (recorder,
+trajectory generator) keep normal scheduling, and the control path sleeps between ticks, so
+they are not starved (the kernel also keeps 5 % of each second for non-real-time threads).
+It needs the privilege: CAP_SYS_NICE or an rtprio limit (``ulimit -r``, e.g. a line
+``@realtime - rtprio 98`` in ``/etc/security/limits.d/``); without it the node says so in
+one warning and runs with normal scheduling.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+#: The largest priority accepted (99 is left to the kernel's own threads' watchdogs).
+MAX_PRIORITY = 98
+#: What to do when it is not permitted (quoted in warnings).
+HOW_TO_PERMIT = ("needs CAP_SYS_NICE or an rtprio limit: `ulimit -r`, e.g. "
+                 "'@realtime - rtprio 98' in /etc/security/limits.d/")
+
+
+class RealtimeNotPermitted(OSError):
+    """SCHED_FIFO was refused (no CAP_SYS_NICE, rtprio limit too low)."""
+
+
+def control_path_threads(pid: int | None = None) -> list[tuple[int, str]]:
+    """(thread id, name) of the main thread (named ``main``) and the Fast DDS shared-memory
+    receive threads of process ``pid`` (default: this one)."""
+    pid = os.getpid() if pid is None else pid
+    out = []
+    for task in sorted(Path(f"/proc/{pid}/task").iterdir(), key=lambda p: int(p.name)):
+        tid = int(task.name)
+        try:
+            name = (task / "comm").read_text().strip()
+        except OSError:  # the thread ended meanwhile
+            continue
+        if tid == pid:
+            out.append((tid, "main"))
+        elif name.startswith("dds.shm.") and name != "dds.shm.wdog":
+            out.append((tid, name))
+    return out
+
+
+class ControlPath:
+    """The control-path threads of this process (:func:`control_path_threads`, listed once)
+    and their SCHED_FIFO priority."""
+
+    def __init__(self) -> None:
+        self.threads = control_path_threads()
+        self.priority = 0
+
+    @property
+    def names(self) -> list[str]:
+        """The threads' names."""
+        return [name for _, name in self.threads]
+
+    def set(self, priority: int) -> None:
+        """SCHED_FIFO at ``priority`` (1..98) for every thread, or raise
+        RealtimeNotPermitted with nothing changed."""
+        if not 1 <= priority <= MAX_PRIORITY:
+            raise ValueError(f"priority {priority} outside [1, {MAX_PRIORITY}]")
+        if priority == self.priority:
+            return
+        done: list[int] = []
+        try:
+            for tid, _ in self.threads:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+                done.append(tid)
+        except PermissionError as err:
+            for tid in done:  # all or nothing
+                os.sched_setscheduler(
+                    tid, *((os.SCHED_FIFO, os.sched_param(self.priority)) if self.priority
+                          else (os.SCHED_OTHER, os.sched_param(0))))
+            raise RealtimeNotPermitted(f"SCHED_FIFO priority {priority} refused "
+                                       f"({err.strerror}): {HOW_TO_PERMIT}") from None
+        except ProcessLookupError:  # a receive thread ended (its transport closed)
+            self.threads = [t for t in self.threads if Path(f"/proc/self/task/{t[0]}").exists()]
+        self.priority = priority
+
+
+def make_realtime(priority: int) -> ControlPath:
+    """Put :func:`control_path_threads` under SCHED_FIFO at ``priority`` (1..98); raises
+    RealtimeNotPermitted (nothing changed) if refused."""
+    path = ControlPath()
+    path.set(priority)
+    return path
+
+
+def realtime_permitted(priority: int) -> bool:
+    """Whether this process may use SCHED_FIFO at ``priority`` (tried on the calling thread,
+    which is put back to normal scheduling)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except PermissionError:
+        return False
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    return True
+
+
+def use_rt_priority(node: Any, log: Any) -> ControlPath | None:
+    """Declare the node's ``rt_priority`` parameter and apply it; say in the log what was
+    set, or why not (one warning). The control path if it runs under SCHED_FIFO, else None
+    (``rt_priority`` 0, or not permitted)."""
+    from .ros_params import declare_node_param
+
+    priority = int(declare_node_param(node, "rt_priority"))
+    if priority == 0:
+        return None
+    try:
+        path = make_realtime(priority)
+    except RealtimeNotPermitted as err:
+        log.warning(f"rt_priority {priority} not applied: {err}; running with normal "
+                    f"scheduling (realtime mode may miss deadlines)")
+        return None
+    log.info(f"rt_priority {priority}: SCHED_FIFO for {', '.join(path.names)}")
+    return path
+
+
+__all__ = ["HOW_TO_PERMIT", "MAX_PRIORITY", "ControlPath", "RealtimeNotPermitted",
+           "control_path_threads",
+           "make_realtime", "realtime_permitted", "use_rt_priority"]

@@ -1,0 +1,73 @@
+"""Real-time scheduling of the control path (``rt_priority``, hexapod_sim/runtime/rt_sched.py).
+
+In a realtime graph started with ``rt_priority`` the sim's and the controllers' main threads
+and Fast DDS shared-memory receive threads run under SCHED_FIFO (the controller in charge
+at the priority, the idle one one below), nothing else does; a node that may not use
+SCHED_FIFO says so in one warning and runs on with normal scheduling.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+from hexapod_sim.runtime.rt_sched import control_path_threads, realtime_permitted
+
+from .conftest import sim_summary
+
+ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics"
+PRIORITY = 20
+
+
+def _policies(pid: int) -> dict[str, tuple[int, int]]:
+    """(policy, priority) of each control-path thread of process ``pid``."""
+    return {name: (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
+            for tid, name in control_path_threads(pid)}
+
+
+@pytest.mark.skipif(not realtime_permitted(PRIORITY), reason="SCHED_FIFO not permitted here")
+def test_realtime_graph_runs_its_control_path_under_sched_fifo(make_graph, tmp_path):
+    g = make_graph(overrides=("sim.mode:=realtime",), rt_priority=PRIORITY)
+    g.start("metrics", f"bag_path:={tmp_path / 'bag'}")
+    for node in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
+        g.start(node)
+    g.start("hexapod_sim", "stop_at_end:=true", "run.duration:=6.0", f"wait_for:={ALL}")
+    g.wait_log("hexapod_sim", "realtime mode", timeout=120)
+    g.wait_log("metrics", "cycle 0 ", timeout=60)  # states have named pd_pf for a while
+    fifo = os.SCHED_FIFO
+    expected = {"hexapod_sim": PRIORITY, "pd_pf_controller": PRIORITY,  # in charge
+                "pd_p_controller": PRIORITY - 1}  # idle
+    for name, prio in expected.items():
+        threads = _policies(g.procs[name].pid)
+        assert "main" in threads and any(t.startswith("dds.shm.") for t in threads), threads
+        assert all(p == (fifo, prio) for p in threads.values()), (name, threads)
+        assert f"rt_priority {PRIORITY}: SCHED_FIFO for main, dds.shm." in g.log(name)
+    # The others keep normal scheduling (the recorder, the trajectory generator) ...
+    for name in ("metrics", "trajectory_generator"):
+        assert os.sched_getscheduler(g.procs[name].pid) == os.SCHED_OTHER
+    # ... and so do the DDS threads off the control path (event thread, watchdog).
+    sim = g.procs["hexapod_sim"].pid
+    others = [t for t in os.listdir(f"/proc/{sim}/task")
+              if int(t) not in {tid for tid, _ in control_path_threads(sim)}]
+    assert others and all(os.sched_getscheduler(int(t)) == os.SCHED_OTHER for t in others)
+    assert g.wait_exit("hexapod_sim", 120) == 0, g.log("hexapod_sim")
+    assert sim_summary(g.log("hexapod_sim"))["tick"] == 6000
+
+
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="needs setpriv (util-linux)")
+def test_a_node_without_the_privilege_warns_once_and_runs_normally(make_graph):
+    g = make_graph(rt_priority=PRIORITY)
+    # setpriv drops CAP_SYS_NICE from the node's process (as for an ordinary user).
+    g.start("pd_p_controller", prefix=("setpriv", "--bounding-set", "-sys_nice"))
+    g.wait_log("pd_p_controller", "active: answering", timeout=120)
+    log = g.log("pd_p_controller")
+    warnings = [x for x in log.splitlines() if "not applied" in x]
+    assert len(warnings) == 1, log
+    assert (f"rt_priority {PRIORITY} not applied: SCHED_FIFO priority {PRIORITY} refused "
+            f"(Operation not permitted): needs CAP_SYS_NICE or an rtprio limit") in warnings[0]
+    assert "running with normal scheduling" in warnings[0]
+    assert all(p[0] == os.SCHED_OTHER
+               for p in _policies(g.procs["pd_p_controller"].pid).values())
+    assert g.stop("pd_p_controller") == 0
+    assert "Traceback" not in g.log("pd_p_controller")
