@@ -59,25 +59,35 @@ STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller
 
 
 class AfterSendLog:
-    """The tick machine's log: what it says at a tick boundary is said once that tick's
-    messages are out (``queue`` is run by :meth:`SimNode._send`): a log line costs tens of
-    microseconds (console and /rosout), which a realtime tick's round trip cannot spare."""
+    """The log of what happens between ticks (the tick machine, parameter changes): while
+    ``running()`` (realtime ticks going out), a line is said once the next tick's messages
+    are out (``queue`` is run by :meth:`SimNode._send`, within a period): a log line costs
+    tens of microseconds (console and /rosout), which a realtime tick's round trip cannot
+    spare. Otherwise at once."""
 
-    def __init__(self, log: FastLogger, queue: list[Callable[[], None]]) -> None:
+    def __init__(self, log: FastLogger, queue: list[Callable[[], None]],
+                 running: Callable[[], bool]) -> None:
         self.log = log
         self.queue = queue
+        self.running = running
+
+    def _say(self, say: Callable[[str], None], message: str) -> None:
+        if self.running():
+            self.queue.append(lambda: say(message))
+        else:
+            say(message)
 
     def info(self, message: str) -> None:
-        """Log at INFO after the send."""
-        self.queue.append(lambda: self.log.info(message))
+        """Log at INFO."""
+        self._say(self.log.info, message)
 
     def warning(self, message: str) -> None:
-        """Log at WARN after the send."""
-        self.queue.append(lambda: self.log.warning(message))
+        """Log at WARN."""
+        self._say(self.log.warning, message)
 
     def error(self, message: str) -> None:
-        """Log at ERROR after the send."""
-        self.queue.append(lambda: self.log.error(message))
+        """Log at ERROR."""
+        self._say(self.log.error, message)
 
 
 class SimNode(Node):
@@ -87,8 +97,12 @@ class SimNode(Node):
         super().__init__("hexapod_sim")
         self.log = FastLogger(self.get_logger().name)
         self.guard = InputGuard(self, self.log)  # authenticates and checks every input
+        # What happens between two ticks (log lines, the switch announcement, parameter
+        # records) goes out just after the next tick's messages: off the round trip.
+        self.after_send: list[Callable[[], None]] = []
+        self.later = AfterSendLog(self.log, self.after_send, self._ticking_in_realtime)
         self.binding = ParamBinding(self, declare_params(self), self._on_params,
-                                    check=self._check_change)
+                                    check=self._check_change, log=self.later)
         self.stop_at_end = declare_node_param(self, "stop_at_end")
         wait_for = declare_node_param(self, "wait_for")
         self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
@@ -113,11 +127,7 @@ class SimNode(Node):
         self.period_ns = int(round(self.period * 1e9))
         self._warm_up()
         # The tick rules (lockstep/realtime, misses, hold, fallback, switch): core/tick_machine.py
-        # What a tick boundary has to say (log lines, the switch announcement, parameter
-        # records) goes out just after that tick's messages: off the round trip.
-        self.after_send: list[Callable[[], None]] = []
-        self.ticks = TickMachine(Physics(p), lambda: self.params,
-                                 AfterSendLog(self.log, self.after_send), self,
+        self.ticks = TickMachine(Physics(p), lambda: self.params, self.later, self,
                                  stop_at_end=self.stop_at_end)
 
         self.loop = HotLoop(self)
@@ -166,6 +176,12 @@ class SimNode(Node):
         saturate(np.zeros((N_LEGS, 2)), 1.0, out)
         probe.advance_tick(out)
 
+    def _ticking_in_realtime(self) -> bool:
+        """Whether realtime ticks are going out (then log lines wait for the next send)."""
+        ticks = getattr(self, "ticks", None)
+        return (ticks is not None and self.mode == "realtime" and ticks.started
+                and not ticks.finished)
+
     def _check_change(self, changes: list[Parameter]) -> str | None:
         """Refuse a ``run.controller`` change to a controller that cannot take over now."""
         for p in changes:
@@ -203,7 +219,7 @@ class SimNode(Node):
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
         if "run.controller" in names and p.run.controller != self.ticks.in_charge:
             self.ticks.request_switch(p.run.controller)
-            self.log.info(f"switch to {p.run.controller} requested: takes effect at "
+            self.later.info(f"switch to {p.run.controller} requested: takes effect at "
                           f"the next tick boundary")
         if any(n.startswith(("ground.", "actuator.")) for n in names):
             self.ticks.request_params(p)

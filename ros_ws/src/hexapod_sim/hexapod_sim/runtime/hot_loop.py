@@ -19,14 +19,15 @@ SingleThreadedExecutor, 0.28-0.34 ms with this loop). So each node splits its en
   ``wake=False`` does not wake the loop: its messages wait until the node takes them
   (:meth:`HotLoop.take`), e.g. when another topic's message needs them; every wake-up
   costs CPU that the other processes of a 2-core machine are waiting for;
-* the node's services (parameters, lifecycle, ...) and timers are in the loop's wait set
-  too, and the loop serves them itself when ready: it takes the request and calls the
-  service's callback, or calls the timer's, as rclpy's executor would, but without the
+* the node's services (parameters, lifecycle, ...), clients and timers are in the loop's
+  wait set too, and the loop serves them itself when ready: it takes the request and calls
+  the service's callback, completes a client's future with its response, or calls the
+  timer's callback, as rclpy's executor would, but without the
   executor's rebuilding of a wait set from every entity of the node (0.5-0.7 ms a time
   here: a `ros2 param set` or the status timer then made the realtime loop miss a tick);
-* everything else (clients' responses, the time source and other executor-run
-  subscriptions, events) stays with a standard ``SingleThreadedExecutor``, run when a
-  client is ready and once every ``service_period``.
+* everything else (the time source and other executor-run subscriptions, events, guard
+  conditions, coroutine callbacks) stays with a standard ``SingleThreadedExecutor``, run
+  once every ``service_period`` (and when a coroutine callback is ready).
 
 One optional wall-clock deadline (:meth:`HotLoop.set_deadline`) serves the sim's lockstep
 timeout and real-time pacing. Everything runs in the main thread: no locks, and callbacks
@@ -85,8 +86,8 @@ class _NeverExecuted(CallbackGroup):
 class HotLoop:
     """Serve raw hot subscriptions with low latency and the rest of a node through an executor.
 
-    ``service_period`` (s): how often the executor runs even when none of the node's
-    services, clients or timers is ready (each run costs ~0.3 ms of executor overhead).
+    ``service_period`` (s): how often the executor runs for what the loop does not serve
+    itself (module doc; each run costs 0.3-0.7 ms of executor overhead).
     ``batch_interval`` (s), if set, makes :meth:`spin` pause that long after each wake-up,
     so a node that needs throughput rather than latency (the recorder) takes its messages
     in batches instead of waking up for each.
@@ -113,6 +114,7 @@ class HotLoop:
         # pointer -> service / timer the loop serves itself (module doc)
         self._services: dict[int, Any] = {}
         self._timers: dict[int, Any] = {}
+        self._clients: dict[int, Any] = {}
         self._deadline: float | None = None
         self._deadline_cb: Callable[[], None] | None = None
         self._next_service = 0.0
@@ -220,14 +222,15 @@ class HotLoop:
                           if not inspect.iscoroutinefunction(s.callback)}
         self._timers = {t.handle.pointer: t for t in node.timers
                         if not inspect.iscoroutinefunction(t.callback)}
+        self._clients = {c.handle.pointer: c for c in node.clients}
         self._wait_set = _rclpy.WaitSet(len(self._handles), 0, len(self._others[2]),
                                         len(self._others[1]), len(self._others[0]), 0,
                                         node.context.handle)
 
     def poll(self, timeout: float) -> None:
-        """Wait up to ``timeout`` s for hot messages and run their callbacks; run the
-        executor when a service, client or timer is ready (or ``service_period`` passed)
-        and the deadline callback when due."""
+        """Wait up to ``timeout`` s for hot messages and run their callbacks; serve ready
+        services, clients and timers; run the deadline callback when due, and the executor
+        every ``service_period``."""
         if self._wait_set is None:
             self._rebuild()
         handles = self._handles
@@ -257,8 +260,9 @@ class HotLoop:
                     self._take(h, msg_type, cb, topic, newest)
                     if self._wait_set is None:  # a callback changed the subscriptions
                         break
-        run_executor = bool(ws.get_ready_entities('client'))
+        run_executor = False
         for kind, own, serve in (('service', self._services, _serve_request),
+                                 ('client', self._clients, _take_response),
                                  ('timer', self._timers, _call_timer)):
             for ptr in ws.get_ready_entities(kind):
                 entity = own.get(ptr)
@@ -325,6 +329,23 @@ def _serve_request(srv: Any) -> None:
     if header is None:
         return
     srv.send_response(srv.callback(request, srv.srv_type.Response()), header)
+
+
+def _take_response(client: Any) -> None:
+    """Take one response of a ready client and complete its request's future (rclpy
+    executor's _take_client; the future's done-callbacks run at once)."""
+    try:
+        with client.handle:
+            header, response = client.handle.take_response(client.srv_type.Response)
+    except InvalidHandle:
+        return
+    if header is None:
+        return
+    try:
+        future = client.get_pending_request(header.request_id.sequence_number)
+    except KeyError:  # the request was cancelled
+        return
+    future.set_result(response)
 
 
 def _call_timer(tmr: Any) -> None:

@@ -172,16 +172,19 @@ class ParamBinding:
 
     ``on_change(params, changed_names)`` runs after an accepted change (post-set callback);
     ``check(changes)``, if given, may refuse a change that is valid in itself but cannot be
-    honoured now (returns the reason, or None).
+    honoured now (returns the reason, or None). ``log``: where to say what was accepted or
+    refused (default: the node's logger).
     """
 
     def __init__(self, node: Node, params: HexapodParams,
                  on_change: Callable[[HexapodParams, set[str]], None] | None = None,
-                 check: Callable[[list[Parameter]], str | None] | None = None) -> None:
+                 check: Callable[[list[Parameter]], str | None] | None = None,
+                 log: Any = None) -> None:
         from .hot_loop import FastLogger
 
         self.node = node
-        self.log = FastLogger(node.get_logger().name)
+        self.log = log if log is not None else FastLogger(node.get_logger().name)
+        self._validated: tuple[list[Parameter], HexapodParams] | None = None
         self.params = params
         self._on_change = on_change
         self._check = check
@@ -211,8 +214,9 @@ class ParamBinding:
         return from_flat(flat)
 
     def _validate(self, changes: list[Parameter]) -> SetParametersResult:
+        self._validated = None
         try:
-            self._merged(changes)
+            merged = self._merged(changes)
         except ParameterError as err:
             self.log.warning(f"rejected: {err}")
             return SetParametersResult(successful=False, reason=str(err))
@@ -220,13 +224,15 @@ class ParamBinding:
         if reason:
             self.log.warning(f"rejected: {reason}")
             return SetParametersResult(successful=False, reason=reason)
+        self._validated = (changes, merged)  # rclpy applies these next (post-set callback)
         return SetParametersResult(successful=True)
 
     def _apply(self, changes: list[Parameter]) -> None:
         names = {p.name for p in changes if p.name in SPECS}
         if not names:
             return
-        self.params = self._merged(changes)
+        done, self._validated = self._validated, None
+        self.params = done[1] if done is not None and done[0] is changes else self._merged(changes)
         for p in changes:
             if p.name in names:
                 self.log.info(f"parameter {p.name} = {p.value!r}")
