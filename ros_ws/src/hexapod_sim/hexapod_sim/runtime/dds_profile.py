@@ -20,10 +20,14 @@ from pathlib import Path
 #: lost samples then wait for the next heartbeat: up to 3 s, which stalled the loop for
 #: 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer NACKs at
 #: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
-#: loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's default
-#: is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the others
-#: within 5 s, so the graph stops sending it samples (a dead reader's shared-memory port
-#: holds buffers of its writers until then).
+#: loopback interface. A participant's lease is 2 s (announced every 0.5 s; Fast DDS's
+#: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
+#: others within 2 s, so the graph stops sending it samples. Until then each reliable writer
+#: keeps every sample the dead reader never acknowledged (up to topics.HISTORY_DEPTH), and
+#: its publish gets slower with their number: with a 5 s lease a SIGKILLed idle controller
+#: made 1 kHz realtime ticks late for 5 s (2967 of 10000 missed, a 2.2 s damping fallback
+#: under SCHED_FIFO); with 2 s, 90 of 10000. A live node would have to miss four
+#: announcements in a row to be dropped.
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -49,8 +53,8 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
         <useBuiltinTransports>false</useBuiltinTransports>
         <builtin>
           <discovery_config>
-            <leaseDuration><sec>5</sec><nanosec>0</nanosec></leaseDuration>
-            <leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>
+            <leaseDuration><sec>2</sec><nanosec>0</nanosec></leaseDuration>
+            <leaseAnnouncement><sec>0</sec><nanosec>500000000</nanosec></leaseAnnouncement>
           </discovery_config>
         </builtin>
       </rtps>
