@@ -61,7 +61,7 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priorit
     ``rt_priority`` (0: normal scheduling); the sim's summary figures, each node's CPU
     seconds and whether every control-path node got SCHED_FIFO; with ``trace_dir`` every
     node writes its trace there."""
-    from hexapod_metrics.cmd_graph import RT_NODES, GraphProcesses
+    from hexapod_metrics.cmd_graph import RT_PRIORITY_NODES, GraphProcesses
     from hexapod_sim.core.msg_auth import AUTH_ENV
     from hexapod_sim.core.trace import TRACE_ENV
 
@@ -92,7 +92,8 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priorit
         raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
     ticks, missed, late, on_time = (int(x) for x in m.groups()[:4])
     rt = re.search(r"round trip median ([\d.na]+) ms, p99 ([\d.na]+) ms", g.log("hexapod_sim"))
-    granted = all(f"rt_priority {rt_priority}: SCHED_FIFO" in g.log(n) for n in RT_NODES)
+    granted = all(f"rt_priority {rt_priority}: SCHED_FIFO" in g.log(n)
+                  for n in RT_PRIORITY_NODES)
     return {"rt": rt_priority if granted else 0,
             "ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
             "rt_median": float(rt.group(1)) if rt else float("nan"),

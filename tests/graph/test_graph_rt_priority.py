@@ -1,9 +1,10 @@
 """Real-time scheduling of the control path (``rt_priority``, hexapod_sim/runtime/rt_sched.py).
 
 In a realtime graph started with ``rt_priority`` the sim's and the controllers' main threads
-and Fast DDS shared-memory receive threads run under SCHED_FIFO (the controller in charge
-at the priority, the idle one one below), nothing else does; a node that may not use
-SCHED_FIFO says so in one warning and runs on with normal scheduling.
+and Fast DDS receive and event threads run under SCHED_FIFO (the controller in charge at
+the priority, the idle one one below), the recorder's and the trajectory generator's Fast
+DDS threads too (not their main threads), nothing else; a node that may not use SCHED_FIFO
+says so in one warning and runs on with normal scheduling.
 """
 from __future__ import annotations
 
@@ -21,9 +22,17 @@ PRIORITY = 20
 
 
 def _policies(pid: int) -> dict[str, tuple[int, int]]:
-    """(policy, priority) of each control-path thread of process ``pid``."""
+    """(policy, priority) of the main thread and the Fast DDS threads of process ``pid``."""
     return {name: (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
             for tid, name in control_path_threads(pid)}
+
+
+def _others(pid: int) -> list[int]:
+    """Policies of the threads of ``pid`` that are neither its main thread nor Fast DDS's
+    receive and event threads."""
+    path = {tid for tid, _ in control_path_threads(pid)}
+    return [os.sched_getscheduler(int(t)) for t in os.listdir(f"/proc/{pid}/task")
+            if int(t) not in path]
 
 
 @pytest.mark.skipif(not realtime_permitted(PRIORITY), reason="SCHED_FIFO not permitted here")
@@ -41,16 +50,21 @@ def test_realtime_graph_runs_its_control_path_under_sched_fifo(make_graph, tmp_p
     for name, prio in expected.items():
         threads = _policies(g.procs[name].pid)
         assert "main" in threads and any(t.startswith("dds.shm.") for t in threads), threads
+        assert any(t.startswith("dds.ev.") for t in threads), threads
         assert all(p == (fifo, prio) for p in threads.values()), (name, threads)
-        assert f"rt_priority {PRIORITY}: SCHED_FIFO for main, dds.shm." in g.log(name)
-    # The others keep normal scheduling (the recorder, the trajectory generator) ...
+        assert f"rt_priority {PRIORITY}: SCHED_FIFO for main, dds." in g.log(name)
+    # The recorder and the trajectory generator: their Fast DDS threads, not the main one.
     for name in ("metrics", "trajectory_generator"):
-        assert os.sched_getscheduler(g.procs[name].pid) == os.SCHED_OTHER
-    # ... and so do the DDS threads off the control path (event thread, watchdog).
-    sim = g.procs["hexapod_sim"].pid
-    others = [t for t in os.listdir(f"/proc/{sim}/task")
-              if int(t) not in {tid for tid, _ in control_path_threads(sim)}]
-    assert others and all(os.sched_getscheduler(int(t)) == os.SCHED_OTHER for t in others)
+        pid = g.procs[name].pid
+        threads = _policies(pid)
+        assert all(p == (fifo, PRIORITY) for t, p in threads.items() if t != "main"), threads
+        assert os.sched_getscheduler(pid) == os.SCHED_OTHER
+        assert f"rt_priority {PRIORITY}: SCHED_FIFO for dds." in g.log(name)
+    # Every other thread keeps normal scheduling (the shared-memory watchdog, UDP receive
+    # threads, Python's own).
+    for name in g.procs:
+        others = _others(g.procs[name].pid)
+        assert others and all(p == os.SCHED_OTHER for p in others), (name, others)
     assert g.wait_exit("hexapod_sim", 120) == 0, g.log("hexapod_sim")
     assert sim_summary(g.log("hexapod_sim"))["tick"] == 6000
 

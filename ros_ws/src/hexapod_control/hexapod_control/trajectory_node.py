@@ -31,6 +31,7 @@ from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
 from hexapod_sim.runtime.param_topic import ParamAnnouncer
 from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -54,6 +55,9 @@ class TrajectoryNode(Node):
         self.binding = ParamBinding(self, declare_params(self))
         self.lookahead = declare_node_param(self, "lookahead")
         self.interval = declare_node_param(self, "publish_interval")
+        # Its Fast DDS threads under SCHED_FIFO when asked (the launcher does in realtime
+        # mode: runtime/rt_sched.py); the main thread keeps normal scheduling.
+        self.rt = use_rt_priority(self, self.log, main=False)
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))

@@ -54,8 +54,11 @@ NICE = {"metrics": 10, "foxglove_bridge": 10}
 #: subscription of a time source costs the lockstep loop ~10 % of its rate here, so it is
 #: off by default.
 SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
-#: The nodes on the control path: ``rt_priority`` (hexapod_sim/runtime/rt_sched.py) is theirs.
+#: The nodes on the control path (main thread and Fast DDS threads under SCHED_FIFO) and all
+#: the nodes that take ``rt_priority`` (hexapod_sim/runtime/rt_sched.py; the recorder and
+#: the trajectory generator for their Fast DDS threads only).
 RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller")
+RT_PRIORITY_NODES = RT_NODES + ("metrics", "trajectory_generator")
 
 
 #: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
@@ -75,7 +78,7 @@ class GraphProcesses:
     ``env`` adds to the current environment (set ``ROS_DOMAIN_ID`` there); every node gets
     ``--params-file params`` if given and its log in ``log_dir/<name>.log``;
     ``use_sim_time`` passes ``use_sim_time:=true`` to the nodes of :data:`SIM_TIME_NODES`;
-    ``rt_priority`` (> 0) passes ``rt_priority:=N`` to the nodes of :data:`RT_NODES`;
+    ``rt_priority`` (> 0) passes ``rt_priority:=N`` to the nodes of :data:`RT_PRIORITY_NODES`;
     ``overrides`` (``"name:=value"``) go to every node. Unless ``env`` names a key file
     (``HEXAPOD_KEY_FILE``) or turns authentication off, the graph gets a fresh run key
     (``hexapod_sim.core.msg_auth``), removed with this object.
@@ -127,7 +130,7 @@ class GraphProcesses:
             args += ["--params-file", str(self.params)]
         if self.use_sim_time and node in SIM_TIME_NODES:
             args += ["-p", "use_sim_time:=true"]
-        if self.rt_priority and node in RT_NODES:
+        if self.rt_priority and node in RT_PRIORITY_NODES:
             args += ["-p", f"rt_priority:={self.rt_priority}"]
         for o in self.overrides + overrides:
             args += ["-p", o]

@@ -115,7 +115,8 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
     p.add_argument("--mode", choices=MODES, default="lockstep", help="graph mode")
     p.add_argument("--rt-priority", dest="rt_priority", type=rt_priority, metavar="N",
                    help=f"SCHED_FIFO priority of the control path (the sim's and the "
-                   f"controllers' main and DDS receive threads); default "
+                   f"controllers' main and Fast DDS threads; the recorder's and the "
+                   f"trajectory generator's Fast DDS threads); default "
                    f"{REALTIME_PRIORITY} in realtime mode, 0 (normal scheduling) in "
                    f"lockstep; needs CAP_SYS_NICE or an rtprio limit, else a warning")
     p.add_argument("--duration", type=_duration, default=6.0,
@@ -293,8 +294,9 @@ class Launcher:
                   f"({HOW_TO_PERMIT}): the control path runs with normal scheduling and "
                   f"realtime mode may miss deadlines", file=sys.stderr, flush=True)
             return 0
-        print(f"run_graph: control path ({', '.join(RT_NODES)}: main and DDS receive "
-              f"threads) under SCHED_FIFO priority {priority}", flush=True)
+        print(f"run_graph: SCHED_FIFO priority {priority} for the control path "
+              f"({', '.join(RT_NODES)}: main and Fast DDS threads) and the other nodes' Fast "
+              f"DDS threads", flush=True)
         return priority
 
     def start(self) -> None:

@@ -33,6 +33,7 @@ from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
 from hexapod_sim.runtime.param_topic import ParamAnnouncer
 from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
@@ -70,6 +71,9 @@ class MetricsNode(Node):
         window = declare_node_param(self, "reorder_window")
         max_size = declare_node_param(self, "max_bag_size")
         max_duration = declare_node_param(self, "max_bag_duration")
+        # Its Fast DDS threads under SCHED_FIFO when asked (the launcher does in realtime
+        # mode: runtime/rt_sched.py); the main thread keeps normal scheduling.
+        self.rt = use_rt_priority(self, self.log, main=False)
         self.period = p.sim.control_period
         # The recorder takes its queues topic by topic and may lag by seconds: a cycle waits
         # for its slowest topic (as offline), and is given up only if a topic stays 10 cycles

@@ -371,8 +371,11 @@ _TIMEOUT = _node(float, 60.0, "wall s to wait for the nodes named, then start an
                  0.0, 1e6)
 _BATCH = "wall s between two takes of the queued messages"
 _RT = _node(int, 0, "SCHED_FIFO priority of the node's control path: its main thread and "
-            "Fast DDS shared-memory receive threads (0 = normal scheduling; needs "
+            "Fast DDS receive and event threads (0 = normal scheduling; needs "
             "CAP_SYS_NICE or an rtprio limit, else a warning and normal scheduling)", 0, 98)
+_RT_DDS = _node(int, 0, "SCHED_FIFO priority of the node's Fast DDS receive and event "
+                "threads (0 = normal scheduling; needs CAP_SYS_NICE or an rtprio limit, else "
+                "a warning and normal scheduling)", 0, 98)
 #: Each node's own parameters (read at start, read-only on the node): type, default, range,
 #: meaning. Checked when a params file is read and when the node declares them.
 NODE_PARAMS: dict[str, dict[str, Spec]] = {
@@ -392,7 +395,8 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
     "trajectory_generator": {
         "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),
         "publish_interval": _node(float, 0.005, "wall s between two bursts of references "
-                                  "(0: a burst at every state)", 0.0, 1.0)},
+                                  "(0: a burst at every state)", 0.0, 1.0),
+        "rt_priority": _RT_DDS},
     "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start"),
                         "rt_priority": _RT},
     "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start"),
@@ -406,6 +410,7 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
                               "(0: one file)", 0, 2**62),
         "max_bag_duration": _node(float, 0.0, "sim s per MCAP file before a new one starts "
                                   "(0: one file)", 0.0, 1e9),
+        "rt_priority": _RT_DDS,
     },
     "markers": {
         "rate": _node(float, 30.0, "markers per simulated second (Hz)", 0.0, 1e6,

@@ -11,11 +11,16 @@ controller manager, the ROS 2 real-time guides) fixes it: the threads of the con
 run under ``SCHED_FIFO``, so a waking one preempts everything else at once: 99 % on time on
 the same machine, also while switching.
 
-:func:`make_realtime` puts this process's main thread and its Fast DDS shared-memory
-receive threads (``dds.shm.<port>``; not the watchdog) under ``SCHED_FIFO`` at a priority.
-Only those: Fast DDS's event thread (heartbeats, timers) and the other nodes (recorder,
-trajectory generator) keep normal scheduling, and the control path sleeps between ticks, so
-they are not starved (the kernel also keeps 5 % of each second for non-real-time threads).
+:func:`make_realtime` puts this process's main thread and its Fast DDS threads that the
+loop waits on (shared-memory receive threads ``dds.shm.<port>``, not the watchdog; the
+event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The recorder and the
+trajectory generator do the same for their Fast DDS threads only (their main threads keep
+normal scheduling): a writer's synchronous publish takes locks (the reader's port, the
+writer's history) that those threads also take, and one of them preempted while holding
+it made the sim's publish wait up to ~1 ms (priority inversion: 25-89 late ticks in 10 s
+with only the control path under SCHED_FIFO, 6-28 with every node's DDS threads too). These
+threads and the control path sleep between ticks, so the rest is not starved (the kernel
+also keeps 5 % of each second for non-real-time threads).
 It needs the privilege: CAP_SYS_NICE or an rtprio limit (``ulimit -r``, e.g. a line
 ``@realtime - rtprio 98`` in ``/etc/security/limits.d/``); without it the node says so in
 one warning and runs with normal scheduling.
@@ -37,9 +42,16 @@ class RealtimeNotPermitted(OSError):
     """SCHED_FIFO was refused (no CAP_SYS_NICE, rtprio limit too low)."""
 
 
-def control_path_threads(pid: int | None = None) -> list[tuple[int, str]]:
-    """(thread id, name) of the main thread (named ``main``) and the Fast DDS shared-memory
-    receive threads of process ``pid`` (default: this one)."""
+def dds_thread(name: str) -> bool:
+    """Whether a thread named ``name`` is one of Fast DDS's that the loop waits on: the
+    shared-memory receive threads (``dds.shm.<port>``; not the watchdog) and the event
+    thread (``dds.ev.<n>``: heartbeats, acknowledgements, timers)."""
+    return (name.startswith("dds.shm.") and name != "dds.shm.wdog") or name.startswith("dds.ev.")
+
+
+def control_path_threads(pid: int | None = None, main: bool = True) -> list[tuple[int, str]]:
+    """(thread id, name) of the main thread (named ``main``; unless ``main`` is False) and
+    the Fast DDS threads (:func:`dds_thread`) of process ``pid`` (default: this one)."""
     pid = os.getpid() if pid is None else pid
     out = []
     for task in sorted(Path(f"/proc/{pid}/task").iterdir(), key=lambda p: int(p.name)):
@@ -49,8 +61,9 @@ def control_path_threads(pid: int | None = None) -> list[tuple[int, str]]:
         except OSError:  # the thread ended meanwhile
             continue
         if tid == pid:
-            out.append((tid, "main"))
-        elif name.startswith("dds.shm.") and name != "dds.shm.wdog":
+            if main:
+                out.append((tid, "main"))
+        elif dds_thread(name):
             out.append((tid, name))
     return out
 
@@ -59,8 +72,8 @@ class ControlPath:
     """The control-path threads of this process (:func:`control_path_threads`, listed once)
     and their SCHED_FIFO priority."""
 
-    def __init__(self) -> None:
-        self.threads = control_path_threads()
+    def __init__(self, main: bool = True) -> None:
+        self.threads = control_path_threads(main=main)
         self.priority = 0
 
     @property
@@ -92,10 +105,10 @@ class ControlPath:
         self.priority = priority
 
 
-def make_realtime(priority: int) -> ControlPath:
+def make_realtime(priority: int, main: bool = True) -> ControlPath:
     """Put :func:`control_path_threads` under SCHED_FIFO at ``priority`` (1..98); raises
     RealtimeNotPermitted (nothing changed) if refused."""
-    path = ControlPath()
+    path = ControlPath(main)
     path.set(priority)
     return path
 
@@ -111,17 +124,18 @@ def realtime_permitted(priority: int) -> bool:
     return True
 
 
-def use_rt_priority(node: Any, log: Any) -> ControlPath | None:
-    """Declare the node's ``rt_priority`` parameter and apply it; say in the log what was
-    set, or why not (one warning). The control path if it runs under SCHED_FIFO, else None
-    (``rt_priority`` 0, or not permitted)."""
+def use_rt_priority(node: Any, log: Any, main: bool = True) -> ControlPath | None:
+    """Declare the node's ``rt_priority`` parameter and apply it (to the main thread too
+    unless ``main`` is False); say in the log what was set, or why not (one warning). The
+    threads if they run under SCHED_FIFO, else None (``rt_priority`` 0, or not
+    permitted)."""
     from .ros_params import declare_node_param
 
     priority = int(declare_node_param(node, "rt_priority"))
     if priority == 0:
         return None
     try:
-        path = make_realtime(priority)
+        path = make_realtime(priority, main)
     except RealtimeNotPermitted as err:
         log.warning(f"rt_priority {priority} not applied: {err}; running with normal "
                     f"scheduling (realtime mode may miss deadlines)")
@@ -131,5 +145,5 @@ def use_rt_priority(node: Any, log: Any) -> ControlPath | None:
 
 
 __all__ = ["HOW_TO_PERMIT", "MAX_PRIORITY", "ControlPath", "RealtimeNotPermitted",
-           "control_path_threads",
+           "control_path_threads", "dds_thread",
            "make_realtime", "realtime_permitted", "use_rt_priority"]
