@@ -89,19 +89,23 @@ class ControlPath:
         if priority == self.priority:
             return
         done: list[int] = []
-        try:
-            for tid, _ in self.threads:
+        gone: list[int] = []
+        for tid, _ in self.threads:
+            try:
                 os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-                done.append(tid)
-        except PermissionError as err:
-            for tid in done:  # all or nothing
-                os.sched_setscheduler(
-                    tid, *((os.SCHED_FIFO, os.sched_param(self.priority)) if self.priority
-                          else (os.SCHED_OTHER, os.sched_param(0))))
-            raise RealtimeNotPermitted(f"SCHED_FIFO priority {priority} refused "
-                                       f"({err.strerror}): {HOW_TO_PERMIT}") from None
-        except ProcessLookupError:  # a receive thread ended (its transport closed)
-            self.threads = [t for t in self.threads if Path(f"/proc/self/task/{t[0]}").exists()]
+            except ProcessLookupError:  # the thread ended (its transport closed)
+                gone.append(tid)
+                continue
+            except PermissionError as err:
+                for t in done:  # all or nothing: back to what they had
+                    if self.priority:
+                        os.sched_setscheduler(t, os.SCHED_FIFO, os.sched_param(self.priority))
+                    else:
+                        os.sched_setscheduler(t, os.SCHED_OTHER, os.sched_param(0))
+                raise RealtimeNotPermitted(f"SCHED_FIFO priority {priority} refused "
+                                           f"({err.strerror}): {HOW_TO_PERMIT}") from None
+            done.append(tid)
+        self.threads = [t for t in self.threads if t[0] not in gone]
         self.priority = priority
 
 
