@@ -30,8 +30,9 @@ from pathlib import Path
 #: with 1.5 s, 93-498 (four); with 1 s, 17-36 (three), the same as without a kill. (The
 #: announcements every 0.25 s may cost realtime runs ~0.3 % of their on-time ticks: 99.41 %
 #: against 99.74 % with 2 s / 0.5 s, medians of 4 interleaved runs, within the noise.) A
-#: live node is dropped only if it misses four announcements in a row (its event thread runs under SCHED_FIFO in realtime runs);
-#: one stopped for longer (SIGSTOP, a debugger) is found again when it resumes.
+#: live node is dropped only if it misses four announcements in a row (its event thread
+#: runs under SCHED_FIFO in realtime runs); one stopped for longer (SIGSTOP, a debugger) is
+#: found again when it resumes.
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
