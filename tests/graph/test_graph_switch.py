@@ -8,6 +8,7 @@ from hexapod_metrics.bag import open_bag
 from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import topics as T
 from hexapod_sim.core.labels import in_charge
+from hexapod_sim.runtime.rt_sched import realtime_permitted
 
 from .conftest import call, hexapod_cli, ros_client, sim_summary
 
@@ -38,7 +39,7 @@ def switch_in_process(client, controller: str) -> None:
     assert call(client, SetParameters, "/hexapod_sim/set_parameters", req).results[0].successful
 
 
-@pytest.mark.parametrize("mode, period, duration", [
+@pytest.mark.parametrize("mode, period, duration, rt", [
     # Lockstep at the real rate, through the CLI. Realtime at 250 Hz and through a client
     # that joined before tick 0: a new process (the CLI) starting on this shared 2-core
     # machine stalls the graph for up to ~0.2 s (its imports and the DDS discovery of a
@@ -48,13 +49,18 @@ def switch_in_process(client, controller: str) -> None:
     # over lagged more than its 10-deep input queues (states, references, foot forces), so
     # the switch tick's messages had rolled out before it looked; it now keeps its inputs
     # current at every state, with 200-deep queues (conversions.CONTROL_DEPTH); strict.
-    ("lockstep", 0.001, 8.0),
-    ("realtime", 0.004, 6.0),
+    # And realtime at 1 kHz with the control path under SCHED_FIFO, as run_graph.sh runs
+    # realtime mode (where permitted).
+    ("lockstep", 0.001, 8.0, 0),
+    ("realtime", 0.004, 6.0, 0),
+    pytest.param("realtime", 0.001, 4.0, 20, marks=pytest.mark.skipif(
+        not realtime_permitted(20), reason="SCHED_FIFO not permitted here")),
 ])
 def test_switch_loses_no_tick_and_lands_in_the_bag(make_graph, tmp_path, mode, period,
-                                                   duration):
+                                                   duration, rt):
     bag_path = tmp_path / "bag"
-    g = make_graph(overrides=(f"sim.control_period:={period}", f"sim.mode:={mode}"))
+    g = make_graph(overrides=(f"sim.control_period:={period}", f"sim.mode:={mode}"),
+                   rt_priority=rt)
     g.start("metrics", f"bag_path:={bag_path}")
     for node in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
         g.start(node)
