@@ -93,7 +93,7 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priorit
     ticks, missed, late, on_time = (int(x) for x in m.groups()[:4])
     rt = re.search(r"round trip median ([\d.na]+) ms, p99 ([\d.na]+) ms", g.log("hexapod_sim"))
     granted = all(f"rt_priority {rt_priority}: SCHED_FIFO" in g.log(n)
-                  for n in RT_PRIORITY_NODES)
+                  for n in RT_PRIORITY_NODES if n in g.procs)
     return {"rt": rt_priority if granted else 0,
             "ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
             "rt_median": float(rt.group(1)) if rt else float("nan"),

@@ -26,6 +26,7 @@ from hexapod_sim.runtime.input_guard import SIGNED_TOPICS, InputGuard
 from hexapod_sim.runtime.node_main import run_node
 from hexapod_sim.runtime.param_topic import ParamAnnouncer
 from hexapod_sim.runtime.ros_params import declare_node_param
+from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.node import Node
 
 from hexapod_sim.runtime import conversions as C
@@ -57,6 +58,8 @@ class FoxgloveBridge(Node):
         host = declare_node_param(self, "host")
         port = declare_node_param(self, "port")
         batch = declare_node_param(self, "batch_interval")
+        # Its Fast DDS threads under SCHED_FIFO when asked (runtime/rt_sched.py).
+        self.rt = use_rt_priority(self, self.log, main=False)
         try:
             self.server = foxglove.start_server(
                 name="hexapod", host=host, port=port,

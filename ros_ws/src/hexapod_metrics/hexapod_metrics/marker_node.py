@@ -23,6 +23,7 @@ from hexapod_sim.runtime.input_guard import InputGuard
 from hexapod_sim.runtime.node_main import run_node
 from hexapod_sim.runtime.param_topic import ParamAnnouncer
 from hexapod_sim.runtime.ros_params import declare_node_param, declare_params
+from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
@@ -106,6 +107,8 @@ class MarkerNode(Node):
         self.signer = self.guard.signer(T.MARKERS)
         deliver_to = declare_node_param(self, "deliver_to")
         timeout = declare_node_param(self, "startup_timeout")
+        # Its Fast DDS threads under SCHED_FIFO when asked (runtime/rt_sched.py).
+        self.rt = use_rt_priority(self, self.get_logger(), main=False)
         # The sim's tick 0 waits for this node's state subscriptions; they are made only once
         # the recorder's subscription is matched, or the first markers are published to
         # nobody (a volatile writer does not keep them for a reader it matches later).

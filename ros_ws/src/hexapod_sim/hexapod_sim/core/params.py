@@ -418,11 +418,13 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
         "deliver_to": _node(str, "metrics", "comma-separated nodes that must receive the "
                             "markers from t = 0 ('' = none)"),
         "startup_timeout": _TIMEOUT,
+        "rt_priority": _RT_DDS,
     },
     "foxglove_bridge": {
         "host": _node(str, "127.0.0.1", "address to listen on"),
         "port": _node(int, 8765, "WebSocket port (0 = any free one)", 0, 65535),
         "batch_interval": _node(float, 0.01, _BATCH, 0.0, 1.0),
+        "rt_priority": _RT_DDS,
     },
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)

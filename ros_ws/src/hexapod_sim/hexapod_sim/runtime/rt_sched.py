@@ -13,14 +13,14 @@ the same machine, also while switching.
 
 :func:`make_realtime` puts this process's main thread and its Fast DDS threads that the
 loop waits on (shared-memory receive threads ``dds.shm.<port>``, not the watchdog; the
-event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The recorder and the
-trajectory generator do the same for their Fast DDS threads only (their main threads keep
-normal scheduling): a writer's synchronous publish takes locks (the reader's port, the
-writer's history) that those threads also take, and one of them preempted while holding
-it made the sim's publish wait up to ~1 ms (priority inversion: 25-89 late ticks in 10 s
-with only the control path under SCHED_FIFO, 6-28 with every node's DDS threads too). These
-threads and the control path sleep between ticks, so the rest is not starved (the kernel
-also keeps 5 % of each second for non-real-time threads).
+event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The other nodes (recorder,
+trajectory generator, markers, Foxglove bridge) do the same for their Fast DDS threads only
+(their main threads keep normal scheduling): a writer's synchronous publish takes locks
+(the reader's port, the writer's history) that those threads also take, and one of them
+preempted while holding it made the sim's publish wait up to ~1 ms (priority inversion:
+25-89 late ticks in 10 s with only the control path under SCHED_FIFO, 6-28 with every
+node's DDS threads too). These threads and the control path sleep between ticks, so the
+rest is not starved (the kernel also keeps 5 % of each second for non-real-time threads).
 It needs the privilege: CAP_SYS_NICE or an rtprio limit (``ulimit -r``, e.g. a line
 ``@realtime - rtprio 98`` in ``/etc/security/limits.d/``); without it the node says so in
 one warning and runs with normal scheduling.
