@@ -61,13 +61,7 @@ def test_killed_recorders_leave_indexed_ordered_bags(make_graph, tmp_path):
     for i, grow in enumerate(KILL_AFTER):
         bag = tmp_path / ("first" if i == 0 else f"kill{i}")
         if i:
-            # At normal priority (not the launcher's nice 10): a recorder that joins mid-run
-            # first gets ~10 MB of transient-local history, and one that cannot drain it
-            # while the lockstep graph runs at full speed loses the samples the writers'
-            # KEEP_LAST histories evict meanwhile (a gap of a few reference ticks, about
-            # one run in eight here: README, "Known gaps"). What this test checks is what a
-            # kill leaves behind.
-            g.start("metrics", f"bag_path:={bag}", node="metrics", nice=0)
+            g.start("metrics", f"bag_path:={bag}", node="metrics")
         g.wait_for(lambda bag=bag: mcap_size(bag) > 0, 120, f"{bag.name} created")
         empty = mcap_size(bag)
         g.wait_for(lambda bag=bag, empty=empty, grow=grow: mcap_size(bag) >= empty + grow
