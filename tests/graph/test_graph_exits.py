@@ -248,7 +248,7 @@ def test_kill_9_of_the_launcher_leaves_no_node_running(script):
 
 
 def test_a_killed_idle_controller_leaves_the_graph_within_its_lease(make_graph):
-    # SIGKILL says no goodbye: the others drop the participant when its lease (1 s in the
+    # SIGKILL says no goodbye: the others drop the participant when its lease (5 s in the
     # graph's profile; Fast DDS's default is 20 s) runs out, and stop sending it samples.
     g = make_graph()
     for n in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):

@@ -20,19 +20,15 @@ from pathlib import Path
 #: lost samples then wait for the next heartbeat: up to 3 s, which stalled the loop for
 #: 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer NACKs at
 #: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
-#: loopback interface. A participant's lease is 1 s (announced every 0.25 s; Fast DDS's
+#: loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's
 #: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
-#: others within 1 s, so the graph stops sending it samples. Until then each reliable writer
-#: keeps every sample the dead reader never acknowledged (up to topics.HISTORY_DEPTH) and
-#: publishes more slowly as they pile up, and the trajectory generator's references fall
-#: behind the states: with a 5 s lease a SIGKILLed idle controller made 2967 of 10000 ticks
-#: late at 1 kHz (a 2.2 s damping fallback under SCHED_FIFO); with 2 s, 29-824 (three runs);
-#: with 1.5 s, 93-498 (four); with 1 s, 17-36 (three), the same as without a kill. (The
-#: announcements every 0.25 s may cost realtime runs ~0.3 % of their on-time ticks: 99.41 %
-#: against 99.74 % with 2 s / 0.5 s, medians of 4 interleaved runs, within the noise.) A
-#: live node is dropped only if it misses four announcements in a row (its event thread
-#: runs under SCHED_FIFO in realtime runs); one stopped for longer (SIGSTOP, a debugger) is
-#: found again when it resumes.
+#: others within 5 s, so the graph stops sending it samples. Until then each reliable writer
+#: keeps every sample the dead reader never acknowledged and publishes more slowly as they
+#: pile up: a SIGKILLed idle controller made 2967 of 10000 realtime ticks late at 1 kHz.
+#: Shorter leases were tried and dropped: with 1-2 s the dead controller cost 17-824 late
+#: ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
+#: by a peer whose lease ran out before its announcements were processed, and the peer never
+#: matched its endpoints again (a controller waited for references for the rest of the run).
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -58,8 +54,8 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
         <useBuiltinTransports>false</useBuiltinTransports>
         <builtin>
           <discovery_config>
-            <leaseDuration><sec>1</sec><nanosec>0</nanosec></leaseDuration>
-            <leaseAnnouncement><sec>0</sec><nanosec>250000000</nanosec></leaseAnnouncement>
+            <leaseDuration><sec>5</sec><nanosec>0</nanosec></leaseDuration>
+            <leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>
           </discovery_config>
         </builtin>
       </rtps>
