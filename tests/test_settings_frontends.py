@@ -106,6 +106,11 @@ PARAMS_FILES = [  # (file content, text the one line must hold)
     ("trajectory_generator:\n  ros__parameters:\n    lookahead: 1.5\n",
      "node 'trajectory_generator': parameter 'lookahead' = 1.5 is invalid: allowed int in "
      "[0, 1000]"),
+    ("pd_pf_controller:\n  ros__parameters:\n    rt_priority: 99\n",
+     "node 'pd_pf_controller': parameter 'rt_priority' = 99 is invalid: allowed int in "
+     "[0, 98]"),
+    ("metrics:\n  ros__parameters:\n    rt_priority: high\n",
+     "node 'metrics': parameter 'rt_priority' = 'high' is invalid"),
 ]
 
 
