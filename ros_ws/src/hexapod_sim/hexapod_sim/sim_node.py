@@ -176,6 +176,13 @@ class SimNode(Node):
         saturate(np.zeros((N_LEGS, 2)), 1.0, out)
         probe.advance_tick(out)
 
+    def run_after_send(self) -> None:
+        """Say what waited for the tick's messages to go out (:class:`AfterSendLog`, the
+        switch announcement, parameter records), in order."""
+        todo, self.after_send[:] = list(self.after_send), []
+        for say in todo:
+            say()
+
     def _ticking_in_realtime(self) -> bool:
         """Whether realtime ticks are going out (then log lines wait for the next send)."""
         ticks = getattr(self, "ticks", None)
@@ -341,9 +348,7 @@ class SimNode(Node):
             self.loop.set_deadline(when, self._on_timeout)
         else:
             self.loop.set_deadline(when, self._on_period_end)
-        todo = self.after_send
-        while todo:
-            todo.pop(0)()
+        self.run_after_send()
 
     def _on_command(self, data: bytes) -> None:
         if self.ticks.finished:
@@ -389,7 +394,8 @@ class SimNode(Node):
     def ready(self, tick: int) -> None:
         """Parameter changes announced at their tick (once it is out); the next tick's
         messages serialized."""
-        self.after_send.append(lambda: self.announcer.flush(tick))
+        if self.announcer.pending:  # most ticks have nothing to announce
+            self.after_send.append(lambda: self.announcer.flush(tick))
         self._prepare()
 
     # ------------------------------------------------------------------ local switch channel
@@ -546,8 +552,7 @@ class SimNode(Node):
 
 def _finish(node: SimNode, code: int) -> int:
     """The summary (log, status, ``summary_path``), the last messages acknowledged."""
-    while node.after_send:  # what the last tick boundary had to say
-        node.after_send.pop(0)()
+    node.run_after_send()  # what the last tick boundary had to say
     if node.ticks.started:
         node.log.info(node.summary())
         node._publish_status()
