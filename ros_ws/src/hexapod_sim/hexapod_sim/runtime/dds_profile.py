@@ -22,11 +22,12 @@ from pathlib import Path
 #: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
 #: loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's
 #: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
-#: others within 5 s, so the graph stops sending it samples. Until then each reliable writer
-#: keeps every sample the dead reader never acknowledged and publishes more slowly as they
-#: pile up: a SIGKILLed idle controller made 2967 of 10000 realtime ticks late at 1 kHz.
-#: Shorter leases were tried and dropped: with 1-2 s the dead controller cost 17-824 late
-#: ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
+#: others within 5 s, so the graph stops sending it samples. Until then the loop is
+#: disturbed: with a SIGKILLed idle controller 80-97 % of realtime 1 kHz ticks were on time
+#: against 89-99 % without (docs/benchmarks.md). Why is not established: best-effort
+#: readers for the controllers (no reliable writer keeping samples for the dead one) and a
+#: 50 ms shared-memory port health check did not change it. Shorter leases were tried and
+#: dropped: with 1-2 s the dead controller cost 17-824 late ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
 #: by a peer whose lease ran out before its announcements were processed, and the peer never
 #: matched its endpoints again (a controller waited for references for the rest of the run).
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
