@@ -3,8 +3,8 @@
 In a realtime graph started with ``rt_priority`` the sim's, the controllers' and the
 trajectory generator's main threads and Fast DDS receive and event threads run under
 SCHED_FIFO (the controller in charge at the priority, the idle one one below), the
-recorder's Fast DDS threads too (not its main thread), nothing else; a node that may not use SCHED_FIFO
-says so in one warning and runs on with normal scheduling.
+recorder's Fast DDS threads too (not its main thread), nothing else; a node that may not
+use SCHED_FIFO says so in one warning and runs on with normal scheduling.
 """
 from __future__ import annotations
 

@@ -31,7 +31,7 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.runtime.dds_profile import private_profile
+from hexapod_sim.runtime.dds_profile import RESTART_PARTICIPANT_IDS, private_profile
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -112,6 +112,8 @@ class GraphProcesses:
             weakref.finalize(self, shutil.rmtree, self._private, True)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
+        self._started: set[str] = set()
+        self._restart_ids = iter(RESTART_PARTICIPANT_IDS)
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
@@ -134,10 +136,19 @@ class GraphProcesses:
             args += ["-p", f"rt_priority:={self.rt_priority}"]
         for o in self.overrides + overrides:
             args += ["-p", o]
+        env = self.env
+        if name in self._started and self._private is not None:
+            # A restart: a participant id of its own, not the previous process's (which
+            # may have died by SIGKILL, leaving its shared-memory port behind).
+            pid = next(self._restart_ids, None)
+            if pid is not None:
+                env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
+                       str(private_profile(self._private, participant_id=pid))}
+        self._started.add(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log
         self.procs[name] = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT,
-                                            env=self.env, start_new_session=True)
+                                            env=env, start_new_session=True)
         return self.procs[name]
 
     def log(self, name: str) -> str:

@@ -27,9 +27,12 @@ from pathlib import Path
 #: against 89-99 % without (docs/benchmarks.md). Why is not established: best-effort
 #: readers for the controllers (no reliable writer keeping samples for the dead one) and a
 #: 50 ms shared-memory port health check did not change it. Shorter leases were tried and
-#: dropped: with 1-2 s the dead controller cost 17-824 late ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
-#: by a peer whose lease ran out before its announcements were processed, and the peer never
-#: matched its endpoints again (a controller waited for references for the rest of the run).
+#: dropped: with 1-2 s the dead controller cost 17-824 late ticks, but under a loaded
+#: lockstep run (a recorder joining) a live node was twice dropped by a peer whose lease ran
+#: out before its announcements were processed, and the peer never matched its endpoints
+#: again (a controller waited for references for the rest of the run; possibly the
+#: shared-memory port reuse that :func:`private_profile` now avoids for restarts, which was
+#: not known then).
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -77,19 +80,37 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
+#: Participant ids given to restarted processes (:func:`private_profile`): above the ids
+#: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
+#: (the unicast ports of id 125 would be the next domain's).
+RESTART_PARTICIPANT_IDS = range(60, 120)
+
+
 def private_profile(directory: str | os.PathLike[str] | None = None,
-                    remove_at_exit: bool = False) -> Path:
+                    remove_at_exit: bool = False, participant_id: int | None = None) -> Path:
     """Write :data:`FASTDDS_PROFILE` to ``directory`` (default: a new private temporary
-    directory, mode 0700) as a file only its owner can read and write; its path."""
+    directory, mode 0700) as a file only its owner can read and write; its path.
+
+    ``participant_id`` fixes the participant's id, hence its ports (default: the first one
+    free). A process started in place of one that was SIGKILLed would otherwise take the
+    dead one's id and open its shared-memory port as the dead process left it; a recorder
+    restarted that way sometimes never received a sample (1 run of 8 of the recorder-kill
+    test: its shared-memory receive thread never woke), so the launcher gives restarted
+    processes ids of their own (:data:`RESTART_PARTICIPANT_IDS`)."""
     made = directory is None
     folder = Path(tempfile.mkdtemp(prefix="hexapod_dds_") if made else directory)
-    path = folder / "fastdds_profile.xml"
+    text, name = FASTDDS_PROFILE, "fastdds_profile.xml"
+    if participant_id is not None:
+        text = text.replace("      <rtps>\n", "      <rtps>\n        <participantID>"
+                            f"{participant_id}</participantID>\n", 1)
+        name = f"fastdds_profile_{participant_id}.xml"
+    path = folder / name
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "w") as f:
-        f.write(FASTDDS_PROFILE)
+        f.write(text)
     if made and remove_at_exit:
         atexit.register(shutil.rmtree, folder, True)
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "private_profile"]
+__all__ = ["FASTDDS_PROFILE", "RESTART_PARTICIPANT_IDS", "private_profile"]
