@@ -24,9 +24,10 @@ from pathlib import Path
 #: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
 #: others within 5 s, so the graph stops sending it samples. Until then the loop is
 #: disturbed: with a SIGKILLed idle controller 80-97 % of realtime 1 kHz ticks were on time
-#: against 89-99 % without (docs/benchmarks.md). Why is not established: best-effort
-#: readers for the controllers (no reliable writer keeping samples for the dead one) and a
-#: 50 ms shared-memory port health check did not change it. Shorter leases were tried and
+#: against 89-99 % without (docs/benchmarks.md): every sample sent to the dead process's
+#: shared-memory port (marked not OK by Fast DDS's watchdog) reopens the port (open, mmap,
+#: munmap: ~10 % of the sim's main thread in a profile). Best-effort readers for the
+#: controllers, a 50 ms port health check and UDP only did not help. Shorter leases were tried and
 #: dropped: with 1-2 s the dead controller cost 17-824 late ticks, but under a loaded
 #: lockstep run (a recorder joining) a live node was twice dropped by a peer whose lease ran
 #: out before its announcements were processed, and the peer never matched its endpoints
