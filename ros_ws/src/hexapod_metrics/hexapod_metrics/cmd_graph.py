@@ -141,10 +141,10 @@ class GraphProcesses:
         if name in self._started and self._private is not None:
             # A restart: a participant id of its own, not the previous process's (which
             # may have died by SIGKILL, leaving its shared-memory port behind).
-            pid = next(self._restart_ids, None)
-            if pid is not None:
+            participant = next(self._restart_ids, None)
+            if participant is not None:
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
-                       str(private_profile(self._private, participant_id=pid))}
+                       str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log
