@@ -44,6 +44,36 @@ def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_g
     assert "1 fallback episodes" in g.log("hexapod_sim")
 
 
+def test_a_controller_says_which_input_it_waited_for_and_what_it_gave_up(make_graph):
+    """No trajectory generator: every state of the controller in charge waits for its
+    reference. The controller says so in a warning (not for tick 0 alone, which always
+    waits for the first reference), counts the waits by missing input and the states it
+    gave up once CONTROL_DEPTH were waiting, and reports them at the end."""
+    import re
+
+    from hexapod_sim.runtime.conversions import CONTROL_DEPTH
+
+    g = make_graph(overrides=("sim.control_period:=0.004", "sim.mode:=realtime"))
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "wait_for:=pd_pf_controller", "stop_at_end:=true",
+            "run.duration:=1.6")  # 400 ticks: more than CONTROL_DEPTH wait
+    assert g.wait_exit("hexapod_sim", 120) == 0, g.log("hexapod_sim")
+    assert g.stop("pd_pf_controller") == 0
+    log = g.log("pd_pf_controller")
+    warnings = [x for x in log.splitlines() if "WARN" in x]
+    assert len(warnings) == 1, log  # one per WARN_EVERY wall s (the run takes ~1.6 s)
+    assert re.search(r"the reference of tick \d+ came after its state \(no reference "
+                     r"queued\); answering when it comes", warnings[0]), warnings
+    m = re.search(r"stopping after 0 commands \((\d+) waited for their reference or foot "
+                  r"forces: (\d+) for the reference, 0 for the foot forces; (\d+) states "
+                  r"given up unanswered", log)
+    assert m, log
+    waited, for_reference, given_up = (int(x) for x in m.groups())
+    ticks = sim_summary(g.log("hexapod_sim"))["tick"]
+    assert waited == for_reference and ticks - 5 <= waited <= ticks + 1
+    assert given_up == waited - CONTROL_DEPTH
+
+
 def _bad_params_file(tmp_path: Path, name: str, value: object) -> Path:
     doc = yaml.safe_load(default_params_path().read_text())
     group, key = name.split(".")

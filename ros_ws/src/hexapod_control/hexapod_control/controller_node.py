@@ -61,6 +61,8 @@ from .core.controllers import control_law, controller_code, gain_vector
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
 IDLE_DRAIN = 0.005  # s between two takes of the queued inputs while not in charge
+WARN_EVERY = 5.0  # wall s between two warnings about late inputs (the counts go on)
+WARN_AFTER = 10  # waits before the first warning (tick 0 always waits for the first reference)
 
 
 class ControllerNode(LifecycleNode):
@@ -91,6 +93,9 @@ class ControllerNode(LifecycleNode):
             self.get_name(), lambda: self.window.newest or 0,
             extra=lambda: {"lifecycle": self.lifecycle,
                            "skipped_inputs": str(self.skipped_inputs),
+                           "waited_reference": str(self.waited_reference),
+                           "waited_forces": str(self.waited_forces),
+                           "abandoned": str(self.abandoned),
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
@@ -113,6 +118,10 @@ class ControllerNode(LifecycleNode):
         self.demand = np.zeros((N_LEGS, 2))
         self.answered = 0
         self.waited = 0  # states whose reference or foot forces came after them
+        self.waited_reference = 0  # of which the reference was missing (the generator behind)
+        self.waited_forces = 0  # of which the foot forces were missing
+        self.abandoned = 0  # states given up unanswered: their inputs never came
+        self.warned_at = -WARN_EVERY  # monotonic s of the last warning about late inputs
         self.skipped_inputs = 0  # references and foot forces of ticks before the newest state
         self.input_floor = -1  # inputs of ticks before it are not needed (no state to answer)
         self._load_gains(self.binding.params)
@@ -269,9 +278,10 @@ class ControllerNode(LifecycleNode):
             self.pending[stamp] = js
             if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give up the oldest
                 del self.pending[min(self.pending)]
+                self.abandoned += 1
             self._answer()
             if self.pending:  # an input is late: let it wake us
-                self.waited += 1
+                self._count_wait(stamp)
                 self.loop.set_wake(self.subs[T.REFERENCE], True)
                 self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
         # After the command is out (off the round trip): take the next tick's reference if
@@ -283,6 +293,29 @@ class ControllerNode(LifecycleNode):
         for buf in (self.refs, self.forces):
             for s in [s for s in buf if s < keep]:
                 del buf[s]
+
+    def _count_wait(self, stamp: int) -> None:
+        """A state of ours (``stamp``, ns) waits: count which input is missing, and say so
+        in a warning (from the WARN_AFTER-th wait on, at most every WARN_EVERY wall s): the
+        cause of missed ticks the sim reports (a starved trajectory generator shows as
+        waits for the reference)."""
+        self.waited += 1
+        ref, ff = stamp not in self.refs, stamp not in self.forces
+        self.waited_reference += ref
+        self.waited_forces += ff
+        now = time.monotonic()
+        if self.waited >= WARN_AFTER and now - self.warned_at >= WARN_EVERY:
+            self.warned_at = now
+            newest = max(self.refs, default=-1)
+            behind = (f"the newest reference is of tick {C.tick_of(newest, self.period_ns)}"
+                      if newest >= 0 else "no reference queued")
+            missing = " and ".join(x for x, m in (("reference", ref), ("foot forces", ff)) if m)
+            self.log.warning(
+                f"the {missing} of tick {C.tick_of(stamp, self.period_ns)} came after its "
+                f"state ({behind}); answering when it comes. So far {self.waited_reference} "
+                f"states waited for their reference (the trajectory generator behind: a "
+                f"busy machine), {self.waited_forces} for their foot forces, "
+                f"{self.abandoned} given up")
 
     def _idle_priority(self) -> int:
         """The SCHED_FIFO priority while another controller is in charge."""
@@ -333,8 +366,10 @@ def _start(node: ControllerNode) -> None:
 
 def _finish(node: ControllerNode, code: int) -> int:
     node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                  f"their reference or foot forces; {node.skipped_inputs} inputs of ticks no state "
-                  f"needed skipped unchecked); "
+                  f"their reference or foot forces: {node.waited_reference} for the "
+                  f"reference, {node.waited_forces} for the foot forces; {node.abandoned} "
+                  f"states given up unanswered, their inputs never came; "
+                  f"{node.skipped_inputs} inputs of ticks no state needed skipped unchecked); "
                   f"inputs: {node.guard.summary()}")
     if node.pub is not None:
         node.pub.wait_for_all_acked(Duration(seconds=1))
