@@ -58,6 +58,7 @@ from sensor_msgs.msg import JointState
 from hexapod_sim.runtime import conversions as C
 
 from .core.controllers import control_law, controller_code, gain_vector
+from .core.waits import InputWaits
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
 IDLE_DRAIN = 0.005  # s between two takes of the queued inputs while not in charge
@@ -93,9 +94,9 @@ class ControllerNode(LifecycleNode):
             self.get_name(), lambda: self.window.newest or 0,
             extra=lambda: {"lifecycle": self.lifecycle,
                            "skipped_inputs": str(self.skipped_inputs),
-                           "waited_reference": str(self.waited_reference),
-                           "waited_forces": str(self.waited_forces),
-                           "abandoned": str(self.abandoned),
+                           "waited_reference": str(self.waits.reference),
+                           "waited_forces": str(self.waits.forces),
+                           "given_up": str(self.waits.given_up),
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
@@ -117,10 +118,7 @@ class ControllerNode(LifecycleNode):
         self.theta_vel_d = np.zeros((N_LEGS, 2))
         self.demand = np.zeros((N_LEGS, 2))
         self.answered = 0
-        self.waited = 0  # states whose reference or foot forces came after them
-        self.waited_reference = 0  # of which the reference was missing (the generator behind)
-        self.waited_forces = 0  # of which the foot forces were missing
-        self.abandoned = 0  # states given up unanswered: their inputs never came
+        self.waits = InputWaits()  # states whose reference or foot forces came after them
         self.warned_at = -WARN_EVERY  # monotonic s of the last warning about late inputs
         self.skipped_inputs = 0  # references and foot forces of ticks before the newest state
         self.input_floor = -1  # inputs of ticks before it are not needed (no state to answer)
@@ -278,7 +276,7 @@ class ControllerNode(LifecycleNode):
             self.pending[stamp] = js
             if len(self.pending) > C.CONTROL_DEPTH:  # inputs that never came: give up the oldest
                 del self.pending[min(self.pending)]
-                self.abandoned += 1
+                self.waits.given_up += 1
             self._answer()
             if self.pending:  # an input is late: let it wake us
                 self._count_wait(stamp)
@@ -299,12 +297,10 @@ class ControllerNode(LifecycleNode):
         in a warning (from the WARN_AFTER-th wait on, at most every WARN_EVERY wall s): the
         cause of missed ticks the sim reports (a starved trajectory generator shows as
         waits for the reference)."""
-        self.waited += 1
         ref, ff = stamp not in self.refs, stamp not in self.forces
-        self.waited_reference += ref
-        self.waited_forces += ff
+        self.waits.count(ref, ff)
         now = time.monotonic()
-        if self.waited >= WARN_AFTER and now - self.warned_at >= WARN_EVERY:
+        if self.waits.waited >= WARN_AFTER and now - self.warned_at >= WARN_EVERY:
             self.warned_at = now
             newest = max(self.refs, default=-1)
             behind = (f"the newest reference is of tick {C.tick_of(newest, self.period_ns)}"
@@ -312,10 +308,7 @@ class ControllerNode(LifecycleNode):
             missing = " and ".join(x for x, m in (("reference", ref), ("foot forces", ff)) if m)
             self.log.warning(
                 f"the {missing} of tick {C.tick_of(stamp, self.period_ns)} came after its "
-                f"state ({behind}); answering when it comes. So far {self.waited_reference} "
-                f"states waited for their reference (the trajectory generator behind: a "
-                f"busy machine), {self.waited_forces} for their foot forces, "
-                f"{self.abandoned} given up")
+                f"state ({behind}); answering when it comes. So far: {self.waits.cause()}")
 
     def _idle_priority(self) -> int:
         """The SCHED_FIFO priority while another controller is in charge."""
@@ -365,10 +358,7 @@ def _start(node: ControllerNode) -> None:
 
 
 def _finish(node: ControllerNode, code: int) -> int:
-    node.log.info(f"stopping after {node.answered} commands ({node.waited} waited for "
-                  f"their reference or foot forces: {node.waited_reference} for the "
-                  f"reference, {node.waited_forces} for the foot forces; {node.abandoned} "
-                  f"states given up unanswered, their inputs never came; "
+    node.log.info(f"stopping after {node.answered} commands ({node.waits.text()}; "
                   f"{node.skipped_inputs} inputs of ticks no state needed skipped unchecked); "
                   f"inputs: {node.guard.summary()}")
     if node.pub is not None:

@@ -36,6 +36,7 @@ from typing import Any, Sequence
 
 import yaml
 
+from hexapod_control.core.waits import parse as parse_waits
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
 from hexapod_sim.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
@@ -432,7 +433,24 @@ class Launcher:
                                  f"episode(s): joint damping from tick "
                                  f"{ranges[0][0] if ranges else '?'} (the controller in "
                                  f"charge went silent)")
+            if summary["missed"] or summary["fallback_episodes"]:
+                lines += self.controller_waits()
         lines += indices_lines(self.bag / "indices.json")
+        return lines
+
+    def controller_waits(self) -> list[str]:
+        """Lines: what each controller's states waited for (its end summary, core/waits.py),
+        the controllers' side of missed ticks."""
+        lines = []
+        g = self.graph
+        for name in (f"{c}_controller" for c in CONTROLLERS):
+            try:
+                waits = parse_waits(g.log(name)) if g is not None else None
+            except OSError:  # not started
+                waits = None
+            cause = waits.cause() if waits is not None else ""
+            if cause:
+                lines.append(f"  {name}: {cause}")
         return lines
 
     def cleanup(self) -> None:
