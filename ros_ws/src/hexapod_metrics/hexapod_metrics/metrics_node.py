@@ -36,7 +36,6 @@ from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, dec
 from hexapod_sim.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 
 from hexapod_sim.runtime import conversions as C
 from hexapod_sim.core import cdr
@@ -200,9 +199,9 @@ class MetricsNode(Node):
             return
         self.counts[T.PARAMETERS] += 1
         try:
-            msg = deserialize_message(payload, DiagnosticArray)
-            recs = [ParamRecord.from_map(st.values, f"parameter record '{st.name}'")
-                    for st in C.statuses(msg) if st.name.startswith(RECORD_NAME + "/")]
+            _, sts = cdr.decode_diagnostic_array(payload)  # as the offline analysis reads them
+            recs = [ParamRecord.from_map(dict(st.values), f"parameter record '{st.name}'")
+                    for st in sts if st.name.startswith(RECORD_NAME + "/")]
         except Exception as err:  # noqa: BLE001 - anything undecodable is dropped, counted
             self.bad_param_records += 1
             self.log.warning(f"dropped a {T.PARAMETERS} message ({self.bad_param_records} so "

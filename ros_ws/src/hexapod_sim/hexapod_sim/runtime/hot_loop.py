@@ -83,6 +83,25 @@ class _NeverExecuted(CallbackGroup):
         pass
 
 
+class _HotSub:
+    """One hot subscription as the loop serves it: its rcl handle (and the handle's pointer,
+    which the wait set reports), message type, callback, topic, the handler of superseded
+    messages (``newest`` subscriptions) and whether a message wakes the loop."""
+
+    __slots__ = ("sub", "handle", "pointer", "msg_type", "callback", "topic", "newest", "wake")
+
+    def __init__(self, sub: Subscription, msg_type: Any, callback: RawCallback,
+                 newest: RawCallback | None, wake: bool) -> None:
+        self.sub = sub
+        self.handle = sub.handle
+        self.pointer = sub.handle.pointer
+        self.msg_type = msg_type
+        self.callback = callback
+        self.topic = sub.topic_name
+        self.newest = newest
+        self.wake = wake
+
+
 class HotLoop:
     """Serve raw hot subscriptions with low latency and the rest of a node through an executor.
 
@@ -101,15 +120,12 @@ class HotLoop:
         self.service_period = float(service_period)
         self.batch_interval = float(batch_interval)
         self._group = _NeverExecuted()
-        self._subs: list[tuple[Subscription, Any, RawCallback]] = []
-        self._sleeping: set[int] = set()  # id() of subscriptions that do not wake the loop
-        # id() of subscriptions served newest first -> what takes their superseded messages
-        self._newest: dict[int, RawCallback] = {}
+        self._subs: dict[int, _HotSub] = {}  # id() of the Subscription -> its record
         #: Messages taken but never given to their callback, per topic: a newer one of a
         #: ``newest`` subscription was accepted at the same wake-up.
         self.superseded: dict[str, int] = {}
         self._wait_set: Any = None
-        self._handles: list[tuple[Any, int, Any, RawCallback, str, RawCallback | None]] = []
+        self._waking: list[_HotSub] = []  # the subscriptions in the wait set
         self._others: tuple[list[Any], list[Any], list[Any]] = ([], [], [])
         # pointer -> service / timer the loop serves itself (module doc)
         self._services: dict[int, Any] = {}
@@ -130,19 +146,13 @@ class HotLoop:
         ``newest`` (the handler of superseded messages), served newest first (module doc)."""
         sub = self.node.create_subscription(msg_type, topic, callback, qos, raw=True,
                                             callback_group=self._group)
-        self._subs.append((sub, msg_type, callback))
-        if not wake:
-            self._sleeping.add(id(sub))
-        if newest is not None:
-            self._newest[id(sub)] = newest
+        self._subs[id(sub)] = _HotSub(sub, msg_type, callback, newest, wake)
         self._wait_set = None
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
         """Destroy a subscription made by :meth:`subscribe`."""
-        self._subs = [s for s in self._subs if s[0] is not sub]
-        self._sleeping.discard(id(sub))
-        self._newest.pop(id(sub), None)
+        self._subs.pop(id(sub), None)
         self._wait_set = None
         self.node.destroy_subscription(sub)
 
@@ -152,25 +162,20 @@ class HotLoop:
 
     def set_wake(self, sub: Subscription, wake: bool) -> None:
         """Whether a message on ``sub`` wakes the loop (else it waits for :meth:`take`)."""
-        if wake == (id(sub) not in self._sleeping):
-            return
-        if wake:
-            self._sleeping.discard(id(sub))
-        else:
-            self._sleeping.add(id(sub))
-        self._wait_set = None
+        entry = self._subs.get(id(sub))
+        if entry is not None and wake != entry.wake:
+            entry.wake = wake
+            self._wait_set = None
 
     def take(self, sub: Subscription) -> int:
         """Take every message queued on ``sub`` now and run its callback on each (newest
         first until one is accepted, for a ``newest`` subscription); how many were taken."""
-        for s, msg_type, cb in self._subs:
-            if s is sub:
-                return self._take(s.handle, msg_type, cb, s.topic_name,
-                                  self._newest.get(id(s)))
-        return 0
+        entry = self._subs.get(id(sub))
+        return 0 if entry is None else self._take(entry)
 
-    def _take(self, h: Any, msg_type: Any, cb: RawCallback, topic: str,
-              newest: RawCallback | None) -> int:
+    def _take(self, entry: _HotSub) -> int:
+        h, msg_type, cb, topic, newest = (entry.handle, entry.msg_type, entry.callback,
+                                          entry.topic, entry.newest)
         tr = trace.TRACER
         batch: list[bytes] = []
         n = 0
@@ -213,9 +218,7 @@ class HotLoop:
     # ------------------------------------------------------------------ spinning
     def _rebuild(self) -> None:
         node = self.node
-        self._handles = [(s.handle, s.handle.pointer, t, cb, s.topic_name,
-                          self._newest.get(id(s)))
-                         for s, t, cb in self._subs if id(s) not in self._sleeping]
+        self._waking = [e for e in self._subs.values() if e.wake]
         self._others = ([s.handle for s in node.services], [c.handle for c in node.clients],
                         [t.handle for t in node.timers])
         self._services = {s.handle.pointer: s for s in node.services
@@ -223,7 +226,7 @@ class HotLoop:
         self._timers = {t.handle.pointer: t for t in node.timers
                         if not inspect.iscoroutinefunction(t.callback)}
         self._clients = {c.handle.pointer: c for c in node.clients}
-        self._wait_set = _rclpy.WaitSet(len(self._handles), 0, len(self._others[2]),
+        self._wait_set = _rclpy.WaitSet(len(self._waking), 0, len(self._others[2]),
                                         len(self._others[1]), len(self._others[0]), 0,
                                         node.context.handle)
 
@@ -233,15 +236,15 @@ class HotLoop:
         every ``service_period``."""
         if self._wait_set is None:
             self._rebuild()
-        handles = self._handles
+        waking = self._waking
         now = time.monotonic()
         if self._deadline is not None:
             timeout = min(timeout, self._deadline - now)
         timeout = min(timeout, self._next_service - now)
         ws = self._wait_set
         ws.clear_entities()
-        for h, _, _, _, _, _ in handles:
-            ws.add_subscription(h)
+        for e in waking:
+            ws.add_subscription(e.handle)
         services, clients, timers = self._others
         for h in services:
             ws.add_service(h)
@@ -255,9 +258,9 @@ class HotLoop:
             tr.wake()
         ready = ws.get_ready_entities('subscription')
         if ready:
-            for h, ptr, msg_type, cb, topic, newest in handles:
-                if ptr in ready:
-                    self._take(h, msg_type, cb, topic, newest)
+            for e in waking:
+                if e.pointer in ready:
+                    self._take(e)
                     if self._wait_set is None:  # a callback changed the subscriptions
                         break
         run_executor = False
@@ -311,7 +314,7 @@ class HotLoop:
 
     def drain(self) -> int:
         """Take and process every message already queued on the hot subscriptions."""
-        return sum(self.take(s) for s, _, _ in list(self._subs))
+        return sum(self._take(e) for e in list(self._subs.values()))
 
     def destroy(self) -> None:
         """Remove the node from the executor and shut the executor down."""
