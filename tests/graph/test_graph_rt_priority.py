@@ -1,10 +1,10 @@
 """Real-time scheduling of the control path (``rt_priority``, hexapod_sim/runtime/rt_sched.py).
 
-In a realtime graph started with ``rt_priority`` the sim's and the controllers' main threads
-and Fast DDS receive and event threads run under SCHED_FIFO (the controller in charge at
-the priority, the idle one one below), the recorder's and the trajectory generator's Fast
-DDS threads too (not their main threads), nothing else; a node that may not use SCHED_FIFO
-says so in one warning and runs on with normal scheduling.
+In a realtime graph started with ``rt_priority`` the sim's, the controllers' and the
+trajectory generator's main threads and Fast DDS receive and event threads run under
+SCHED_FIFO (the controller in charge at the priority, the idle one one below), the
+recorder's Fast DDS threads too (not its main thread), nothing else; a node that may not
+use SCHED_FIFO says so in one warning and runs on with normal scheduling.
 """
 from __future__ import annotations
 
@@ -46,15 +46,16 @@ def test_realtime_graph_runs_its_control_path_under_sched_fifo(make_graph, tmp_p
     g.wait_log("metrics", "cycle 0 ", timeout=60)  # states have named pd_pf for a while
     fifo = os.SCHED_FIFO
     expected = {"hexapod_sim": PRIORITY, "pd_pf_controller": PRIORITY,  # in charge
-                "pd_p_controller": PRIORITY - 1}  # idle
+                "pd_p_controller": PRIORITY - 1,  # idle
+                "trajectory_generator": PRIORITY}
     for name, prio in expected.items():
         threads = _policies(g.procs[name].pid)
         assert "main" in threads and any(t.startswith("dds.shm.") for t in threads), threads
         assert any(t.startswith("dds.ev.") for t in threads), threads
         assert all(p == (fifo, prio) for p in threads.values()), (name, threads)
         assert f"rt_priority {PRIORITY}: SCHED_FIFO for main, dds." in g.log(name)
-    # The recorder and the trajectory generator: their Fast DDS threads, not the main one.
-    for name in ("metrics", "trajectory_generator"):
+    # The recorder: its Fast DDS threads, not the main one.
+    for name in ("metrics",):
         pid = g.procs[name].pid
         threads = _policies(pid)
         assert all(p == (fifo, PRIORITY) for t, p in threads.items() if t != "main"), threads

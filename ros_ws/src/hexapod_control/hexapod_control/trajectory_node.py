@@ -55,12 +55,10 @@ class TrajectoryNode(Node):
         self.binding = ParamBinding(self, declare_params(self))
         self.lookahead = declare_node_param(self, "lookahead")
         self.interval = declare_node_param(self, "publish_interval")
-        # Its Fast DDS threads under SCHED_FIFO when asked (the launcher does in realtime
-        # mode: runtime/rt_sched.py); the main thread keeps normal scheduling. (With it under
-        # SCHED_FIFO too, S5 went from 32 to 99 % on a slow day, but the real-time threads
-        # then left other processes so little CPU that a ROS client in the switch test did
-        # not discover the sim's services within 30 s in 3 of 4 runs: docs/benchmarks.md.)
-        self.rt = use_rt_priority(self, self.log, main=False)
+        # Its main and Fast DDS threads under SCHED_FIFO when asked (the launcher does in
+        # realtime mode: runtime/rt_sched.py): a controller waits for the reference of its
+        # tick, so this node is on the control path although it publishes ahead.
+        self.rt = use_rt_priority(self, self.log)
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))

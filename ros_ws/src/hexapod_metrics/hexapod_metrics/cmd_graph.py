@@ -57,9 +57,8 @@ SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller",
 #: The nodes on the control path (main thread and Fast DDS threads under SCHED_FIFO) and all
 #: the nodes that take ``rt_priority`` (hexapod_sim/runtime/rt_sched.py; the others for
 #: their Fast DDS threads only).
-RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller")
-RT_PRIORITY_NODES = RT_NODES + ("metrics", "trajectory_generator", "markers",
-                                "foxglove_bridge")
+RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller", "trajectory_generator")
+RT_PRIORITY_NODES = RT_NODES + ("metrics", "markers", "foxglove_bridge")
 
 
 #: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.

@@ -115,9 +115,9 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
                    help="keep the first controller all along")
     p.add_argument("--mode", choices=MODES, default="lockstep", help="graph mode")
     p.add_argument("--rt-priority", dest="rt_priority", type=rt_priority, metavar="N",
-                   help=f"SCHED_FIFO priority of the control path (the sim's and the "
-                   f"controllers' main and Fast DDS threads; the other nodes' Fast DDS "
-                   f"threads); default "
+                   help=f"SCHED_FIFO priority of the control path (the sim's, the "
+                   f"controllers' and the trajectory generator's main and Fast DDS "
+                   f"threads; the other nodes' Fast DDS threads); default "
                    f"{REALTIME_PRIORITY} in realtime mode, 0 (normal scheduling) in "
                    f"lockstep; needs CAP_SYS_NICE or an rtprio limit, else a warning")
     p.add_argument("--duration", type=_duration, default=6.0,

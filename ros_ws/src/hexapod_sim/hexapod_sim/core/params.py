@@ -396,7 +396,7 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
         "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),
         "publish_interval": _node(float, 0.005, "wall s between two bursts of references "
                                   "(0: a burst at every state)", 0.0, 1.0),
-        "rt_priority": _RT_DDS},
+        "rt_priority": _RT},
     "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start"),
                         "rt_priority": _RT},
     "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start"),

@@ -13,9 +13,13 @@ the same machine, also while switching.
 
 :func:`make_realtime` puts this process's main thread and its Fast DDS threads that the
 loop waits on (shared-memory receive threads ``dds.shm.<port>``, not the watchdog; the
-event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The other nodes (recorder,
-trajectory generator, markers, Foxglove bridge) do the same for their Fast DDS threads only
-(their main threads keep normal scheduling): a writer's synchronous publish takes locks
+event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The trajectory generator is
+on the control path too: it publishes 50 ticks ahead, but with its main thread under normal
+scheduling on a busy machine it was starved for 60-100 ms at a time and the controller in
+charge waited for its references (75-2900 late ticks in 10 s, against 76-1600 with it under
+SCHED_FIFO, interleaved runs on one machine). The other nodes (recorder, markers, Foxglove
+bridge) do the same for their Fast DDS threads only (their main threads keep normal
+scheduling): a writer's synchronous publish takes locks
 (the reader's port, the writer's history) that those threads also take, and one of them
 preempted while holding it made the sim's publish wait up to ~1 ms (priority inversion:
 25-89 late ticks in 10 s with only the control path under SCHED_FIFO, 6-28 with every
