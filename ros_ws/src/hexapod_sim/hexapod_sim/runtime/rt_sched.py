@@ -17,7 +17,12 @@ event thread ``dds.ev.<n>``) under ``SCHED_FIFO`` at a priority. The trajectory 
 on the control path too: it publishes 50 ticks ahead, but with its main thread under normal
 scheduling on a busy machine it was starved for 60-100 ms at a time and the controller in
 charge waited for its references (75-2900 late ticks in 10 s, against 76-1600 with it under
-SCHED_FIFO, interleaved runs on one machine). The other nodes (recorder, markers, Foxglove
+SCHED_FIFO, interleaved runs on one machine); on a machine the 1 kHz graph overloads, it ran
+only every 0.2-1.3 s, the controller waited for its reference at 4354-4996 of 5000 ticks
+(11 with it under SCHED_FIFO) and gave the oldest waiting states up, the switch tick among
+them. The price on such a machine: the real-time threads leave other processes little CPU
+(a new ROS participant did not discover the sim's services within 60 s there, with the
+generator under SCHED_FIFO or not). The other nodes (recorder, markers, Foxglove
 bridge) do the same for their Fast DDS threads only (their main threads keep normal
 scheduling): a writer's synchronous publish takes locks
 (the reader's port, the writer's history) that those threads also take, and one of them
