@@ -59,20 +59,21 @@ def dds_thread(name: str) -> bool:
 
 
 def control_path_threads(pid: int | None = None, main: bool = True) -> list[tuple[int, str]]:
-    """(thread id, name) of the main thread (named ``main``; unless ``main`` is False) and
-    the Fast DDS threads (:func:`dds_thread`) of process ``pid`` (default: this one)."""
+    """(thread id, name) of the main thread (named ``main``, first; unless ``main`` is
+    False) and the Fast DDS threads (:func:`dds_thread`, by thread id) of process ``pid``
+    (default: this one). (Thread ids are not ordered by age: once the kernel's pid counter
+    wraps, a thread made after the main one may have a lower id.)"""
     pid = os.getpid() if pid is None else pid
-    out = []
+    out = [(pid, "main")] if main else []
     for task in sorted(Path(f"/proc/{pid}/task").iterdir(), key=lambda p: int(p.name)):
         tid = int(task.name)
+        if tid == pid:
+            continue
         try:
             name = (task / "comm").read_text().strip()
         except OSError:  # the thread ended meanwhile
             continue
-        if tid == pid:
-            if main:
-                out.append((tid, "main"))
-        elif dds_thread(name):
+        if dds_thread(name):
             out.append((tid, name))
     return out
 
