@@ -2,7 +2,7 @@
 
 In a realtime graph started with ``rt_priority`` the sim's, the controllers' and the
 trajectory generator's main threads and Fast DDS receive and event threads run under
-SCHED_FIFO (the controller in charge at the priority, the idle one one below), the
+SCHED_FIFO (both controllers at the priority, in charge or not), the
 recorder's Fast DDS threads too (not its main thread), nothing else; a node that may not
 use SCHED_FIFO says so in one warning and runs on with normal scheduling.
 """
@@ -50,7 +50,7 @@ def test_realtime_graph_runs_its_control_path_under_sched_fifo(make_graph, tmp_p
     assert g.procs["hexapod_sim"].poll() is None, g.log("hexapod_sim")
     fifo = os.SCHED_FIFO
     expected = {"hexapod_sim": PRIORITY, "pd_pf_controller": PRIORITY,  # in charge
-                "pd_p_controller": PRIORITY - 1,  # idle
+                "pd_p_controller": PRIORITY,  # idle
                 "trajectory_generator": PRIORITY}
     for name, prio in expected.items():
         threads = _policies(g.procs[name].pid)

@@ -80,13 +80,13 @@ class ControllerNode(LifecycleNode):
         self.window = M.StampWindow(increasing=True)
         self.binding = ParamBinding(self, declare_params(self), self._on_params)
         self.autostart = declare_node_param(self, "autostart")
-        # SCHED_FIFO for the control path when asked (the launcher does in realtime mode):
-        # at rt_priority while in charge, one below while idle, so that the controller in
-        # charge (and the sim) come first when both controllers wake at the same state.
+        # SCHED_FIFO for the control path when asked (the launcher does in realtime mode),
+        # at rt_priority whether in charge or not: with the idle controller one priority
+        # below (the design until 2026-12) it was starved past its CONTROL_DEPTH-deep state
+        # queue on a loaded machine and lost the ticks after a switch to it (28 of 195
+        # switches in 7 runs of bench_switch.py, against 2 of 120 at the same priority:
+        # docs/benchmarks.md).
         self.rt = use_rt_priority(self, self.log)
-        self.rt_priority = self.rt.priority if self.rt is not None else 0
-        if self.rt is not None:
-            self.rt.set(self._idle_priority())
         # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
         # /hexapod/status, so the bag records it with the sim time it happened at.
         self.lifecycle = "unconfigured"
@@ -263,8 +263,6 @@ class ControllerNode(LifecycleNode):
         stamp = js.stamp_ns
         self.input_floor = min(self.pending, default=stamp)
         mine = in_charge(js.frame_id) == self.arch and self.active
-        if mine != self.in_charge and self.rt is not None:
-            self.rt.set(self.rt_priority if mine else self._idle_priority())
         self.in_charge = mine
         if mine and T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
@@ -309,10 +307,6 @@ class ControllerNode(LifecycleNode):
             self.log.warning(
                 f"the {missing} of tick {C.tick_of(stamp, self.period_ns)} came after its "
                 f"state ({behind}); answering when it comes. So far: {self.waits.cause()}")
-
-    def _idle_priority(self) -> int:
-        """The SCHED_FIFO priority while another controller is in charge."""
-        return max(1, self.rt_priority - 1)
 
     def _answer(self) -> None:
         """Compute and publish the command of each pending state whose inputs are there."""
