@@ -23,12 +23,13 @@ moment, so a dead idle controller's cost shows against the same run without a ki
 
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
        [--rt-priority 20] [--via service|tool]
-       [--no-baseline] [--kill-idle S]
+       [--no-baseline] [--kill-idle S] [--keep DIR]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import multiprocessing
 import os
 import re
@@ -37,11 +38,26 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Iterator
 from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
 ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics,bench_switch"
 SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time")
+
+
+@contextlib.contextmanager
+def _work_dir(keep: Path | None) -> Iterator[str]:
+    """Where the runs write their logs and bags: ``keep`` (created, kept) or a temporary
+    directory (removed at the end)."""
+    if keep is not None:
+        if keep.exists() and any(keep.iterdir()):
+            raise SystemExit(f"bench_switch.py: error: --keep {keep}: not an empty directory")
+        keep.mkdir(parents=True, exist_ok=True)
+        yield str(keep)
+        return
+    with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
+        yield tmp
 
 
 def _hog() -> None:
@@ -221,6 +237,9 @@ def main() -> int:
     ap.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
                     help="graph mode (lockstep: compare real-time factors)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
+    ap.add_argument("--keep", type=Path, metavar="DIR",
+                    help="keep each run's logs and bag in DIR/run0, DIR/run1 (default: a "
+                    "temporary directory, removed)")
     ap.add_argument("--kill-idle", type=float, metavar="S",
                     help="compare runs without switches, one with the idle controller killed "
                     "S wall s in")
@@ -235,7 +254,7 @@ def main() -> int:
           f"switching through {'switch_controller.sh' if args.via == 'tool' else 'set_parameters'}")
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:
-        with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
+        with _work_dir(args.keep) as tmp:
             base_run = run(args, 0, base % 101 + 1, Path(tmp) / "run0", kill_idle=0.0)
             killed = run(args, 0, (base + 1) % 101 + 1, Path(tmp) / "run1",
                          kill_idle=args.kill_idle)
@@ -250,7 +269,7 @@ def main() -> int:
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return 0
     try:
-        with tempfile.TemporaryDirectory(prefix="bench_switch_") as tmp:
+        with _work_dir(args.keep) as tmp:
             runs = [("switching", args.switches)]
             if not args.no_baseline:
                 runs.insert(0, ("no switch", 0))

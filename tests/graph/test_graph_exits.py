@@ -17,7 +17,6 @@ from typing import Any, Callable
 import pytest
 
 from hexapod_metrics.graph_launcher import EXIT_CODES
-from hexapod_sim.runtime.dds_profile import PORT_QUEUE, SHORT_PORT_QUEUE
 
 from .conftest import call, hexapod_cli, next_domain_id, ros_client, sim_summary
 
@@ -280,17 +279,6 @@ def test_fast_dds_profile_is_private_to_the_graph(make_graph, tmp_path):
     assert path != planted and path.read_text().count("127.0.0.1") == 1
     assert stat.S_IMODE(path.parent.stat().st_mode) == 0o700
     assert stat.S_IMODE(path.stat().st_mode) == 0o600
-    # The controllers listen on a short shared-memory port queue (what a SIGKILLed one
-    # leaves allocated in its senders, dds_profile.py), from a private file beside it.
-    g.start("pd_p_controller")
-    g.start("trajectory_generator")
-    for name, queue in (("pd_p_controller", SHORT_PORT_QUEUE), ("trajectory_generator", None)):
-        environ = Path(f"/proc/{g.procs[name].pid}/environ").read_bytes().split(b"\0")
-        used = Path(next(e for e in environ if e.startswith(b"FASTRTPS_DEFAULT_PROFILES_FILE="))
-                    .split(b"=", 1)[1].decode())
-        assert used.parent == path.parent and stat.S_IMODE(used.stat().st_mode) == 0o600
-        assert (used == path) == (queue is None)
-        assert f"<port_queue_capacity>{queue or PORT_QUEUE}<" in used.read_text()
     g.stop_all()
     assert not path.exists()
 

@@ -31,8 +31,7 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, port_queue_for,
-                                              private_profile)
+from hexapod_sim.runtime.dds_profile import RESTART_PARTICIPANT_IDS, private_profile
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -115,7 +114,6 @@ class GraphProcesses:
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()
         self._restart_ids = iter(RESTART_PARTICIPANT_IDS)
-        self._profiles: dict[tuple[int | None, int | None], Path] = {}
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
@@ -139,17 +137,13 @@ class GraphProcesses:
         for o in self.overrides + overrides:
             args += ["-p", o]
         env = self.env
-        if self._private is not None:
+        if name in self._started and self._private is not None:
             # A restart: a participant id of its own, not the previous process's (which
             # may have died by SIGKILL, leaving its shared-memory port behind).
-            participant = next(self._restart_ids, None) if name in self._started else None
-            queue = port_queue_for(node)  # a controller: a short port queue (dds_profile)
-            if participant is not None or queue is not None:
-                key = (participant, queue)
-                if key not in self._profiles:
-                    self._profiles[key] = private_profile(
-                        self._private, participant_id=participant, port_queue=queue)
-                env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(self._profiles[key])}
+            participant = next(self._restart_ids, None)
+            if participant is not None:
+                env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
+                       str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log

@@ -14,42 +14,43 @@ import shutil
 import tempfile
 from pathlib import Path
 
-#: Port health check of the graph's processes (ms): longer than their 5 s lease (see below).
-HEALTHY_CHECK_MS = 10000
-#: Port queue (messages) a graph process listens on ...
-PORT_QUEUE = 4096
-#: ... and the one of the processes that come and go while the loop runs (see below).
-SHORT_PORT_QUEUE = 1024
-#: The nodes that listen on a :data:`SHORT_PORT_QUEUE`.
-SHORT_PORT_NODES = ("pd_p_controller", "pd_pf_controller")
+#: Port queue (messages) of every graph process's shared-memory port (see below).
+PORT_QUEUE = 1024
+#: How long (ms) a sender waits for the listeners of a shared-memory port to show they are
+#: alive before declaring the port broken (Fast DDS's default: 1000; see below).
+HEALTHY_CHECK_MS = 3000
 
 #: Fast DDS profile of the graph's processes (used when discovery is localhost-only and no
 #: profile is set): a larger shared-memory segment and port queue (the defaults, 0.5 MB and
-#: 512 messages per process, fill up when one process stalls for ~0.1 s at 1 kHz, and the
-#: lost samples then wait for the next heartbeat: up to 3 s, which stalled the loop for
-#: 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer NACKs at
-#: once, so that a sample lost anyway is repaired within a few ticks. UDP stays on the
-#: loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's
+#: 512 messages per process, filled up when one process stalled for ~0.1 s at 1 kHz, and
+#: the lost samples then waited for the next heartbeat: up to 3 s, which stalled the loop
+#: for 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer
+#: NACKs at once, so that a sample lost anyway is repaired within a few ticks. UDP stays on
+#: the loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's
 #: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
 #: others within 5 s, so the graph stops sending it samples.
 #:
-#: Until then its readers stay matched, and every sample for them goes into its
-#: shared-memory port, where nobody takes it. With Fast DDS's default port health check
-#: (1 s) a sender's watchdog declared such a port dead about 1.5 s after the kill, and from
-#: then on every sample sent to it re-created the port (open, mmap, munmap: ~28000 openat
-#: calls in the sim within 3.5 s, its CPU time up by ~90 %; on time 80-83 % after the kill
-#: against 95 % before, at 500 Hz). With a health check longer than the lease
-#: (:data:`HEALTHY_CHECK_MS`) the port is never re-created; the dead port's queue fills up
-#: instead, and every buffer it holds stays allocated in the sender's segment, which Fast
-#: DDS walks on every allocation (its ``recover_buffers``): with a 4096-deep queue the sim's
-#: CPU time stayed ~25 % up for the rest of the run. So the processes that are expected to
-#: come and go while the loop runs (the controllers: switched, restarted, killed) listen on
-#: a shorter queue (:data:`SHORT_PORT_QUEUE`; :func:`port_queue_for`), which bounds what a
-#: dead one leaves allocated in its senders (measured: no rise in the sim's CPU time
-#: outside the noise, docs/benchmarks.md). Shorter leases were tried and dropped: with
+#: Until then its readers stay matched and every sample for them goes into its
+#: shared-memory port, where nobody takes it. Once a sender's watchdog has declared that
+#: port broken (no sign of its listener for the health check's time), every sample sent to
+#: it re-creates the port (open, mmap, munmap): with Fast DDS's 1 s check, ~28000-34000
+#: `openat` calls in the sim from ~1.5 s after an idle controller's SIGKILL until its lease
+#: ended, the sim's CPU time up ~90 % meanwhile (on time 79-83 % after the kill against 95 %
+#: before, at 500 Hz on a slow day). Before that, the port's queue fills up and each buffer
+#: it holds stays allocated in the sender's shared-memory segment, which Fast DDS walks at
+#: every allocation (its ``recover_buffers``): the reason for a 1024-deep queue rather than
+#: 4096 (with a check longer than the lease, which ends the re-creation altogether, 4096
+#: kept the sim's CPU time ~25 % up for the rest of the run; 1024 showed no rise beyond the
+#: noise). A check longer than the lease was tried and dropped: the same check governs the
+#: port every participant of the domain listens on for discovery, and with 10 s `hexapod
+#: status` saw no node for 5 s after a controller's SIGKILL. With 3 s the re-creation
+#: starts later and lasts ~1 s (6062 `openat` calls) and a new process still discovers the
+#: graph within its 5 s (docs/benchmarks.md). Shorter leases were tried and dropped: with
 #: 1-2 s the dead controller cost 17-824 late ticks, but under a loaded lockstep run (a
 #: recorder joining) a live node was twice dropped by a peer whose lease ran out before its
-#: announcements were processed, and the peer never matched its endpoints again.
+#: announcements were processed, and the peer never matched its endpoints again (possibly
+#: the shared-memory port reuse that :func:`private_profile` now avoids for restarts, which
+#: was not known then).
 FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -98,11 +99,6 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
-def port_queue_for(node: str) -> int | None:
-    """The port queue capacity node ``node`` listens on, if not the profile's default."""
-    return SHORT_PORT_QUEUE if node in SHORT_PORT_NODES else None
-
-
 #: Participant ids given to restarted processes (:func:`private_profile`): above the ids
 #: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
 #: (the unicast ports of id 125 would be the next domain's).
@@ -110,8 +106,7 @@ RESTART_PARTICIPANT_IDS = range(60, 120)
 
 
 def private_profile(directory: str | os.PathLike[str] | None = None,
-                    remove_at_exit: bool = False, participant_id: int | None = None,
-                    port_queue: int | None = None) -> Path:
+                    remove_at_exit: bool = False, participant_id: int | None = None) -> Path:
     """Write :data:`FASTDDS_PROFILE` to ``directory`` (default: a new private temporary
     directory, mode 0700) as a file only its owner can read and write; its path.
 
@@ -120,10 +115,7 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     dead one's id and open its shared-memory port as the dead process left it; a recorder
     restarted that way sometimes never received a sample (1 run of 8 of the recorder-kill
     test: its shared-memory receive thread never woke), so the launcher gives restarted
-    processes ids of their own (:data:`RESTART_PARTICIPANT_IDS`).
-
-    ``port_queue`` sets the capacity of the participant's shared-memory port (default:
-    the profile's; :func:`port_queue_for`)."""
+    processes ids of their own (:data:`RESTART_PARTICIPANT_IDS`)."""
     made = directory is None
     folder = Path(tempfile.mkdtemp(prefix="hexapod_dds_") if made else directory)
     text, name = FASTDDS_PROFILE, "fastdds_profile.xml"
@@ -131,10 +123,6 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
         text = text.replace("      <rtps>\n", "      <rtps>\n        <participantID>"
                             f"{participant_id}</participantID>\n", 1)
         name = f"fastdds_profile_{participant_id}.xml"
-    if port_queue is not None:
-        text = text.replace(f"<port_queue_capacity>{PORT_QUEUE}<",
-                            f"<port_queue_capacity>{port_queue}<", 1)
-        name = name.replace(".xml", f"_q{port_queue}.xml")
     path = folder / name
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "w") as f:
@@ -145,4 +133,4 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
 
 
 __all__ = ["FASTDDS_PROFILE", "HEALTHY_CHECK_MS", "PORT_QUEUE", "RESTART_PARTICIPANT_IDS",
-           "SHORT_PORT_NODES", "SHORT_PORT_QUEUE", "port_queue_for", "private_profile"]
+           "private_profile"]

@@ -63,7 +63,7 @@ from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
 from ..core import trace
-from .dds_profile import FASTDDS_PROFILE, port_queue_for, private_profile
+from .dds_profile import FASTDDS_PROFILE, private_profile
 
 RawCallback = Callable[[bytes], Any]  # ``newest`` subscriptions: True if accepted
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
@@ -395,12 +395,11 @@ class FastLogger:
         self._log(LoggingSeverity.ERROR, message)
 
 
-def configure_middleware(node_name: str = "") -> None:
+def configure_middleware() -> None:
     """DDS settings of the graph's processes; call before ``rclpy.init``.
 
     Publication is synchronous and, with localhost-only discovery (the project's default),
-    the Fast DDS profile :data:`FASTDDS_PROFILE` applies (with the port queue of node
-    ``node_name``: ``dds_profile.port_queue_for``), written to a private file of this
+    the Fast DDS profile :data:`FASTDDS_PROFILE` applies, written to a private file of this
     process (never read from a shared, predictable path: see dds_profile.py); the
     environment overrides both (``RMW_FASTRTPS_PUBLICATION_MODE``,
     ``FASTRTPS_DEFAULT_PROFILES_FILE``, which the graph launcher sets to its own private
@@ -409,8 +408,7 @@ def configure_middleware(node_name: str = "") -> None:
     os.environ.setdefault("RMW_FASTRTPS_PUBLICATION_MODE", "SYNCHRONOUS")
     if (os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") == "LOCALHOST"
             and "FASTRTPS_DEFAULT_PROFILES_FILE" not in os.environ):
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(
-            remove_at_exit=True, port_queue=port_queue_for(node_name)))
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(remove_at_exit=True))
 
 
 def init_rclpy(args: list[str] | None, node_name: str) -> bool:
@@ -419,7 +417,7 @@ def init_rclpy(args: list[str] | None, node_name: str) -> bool:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    configure_middleware(node_name)
+    configure_middleware()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _rclpy.RCLError as err:
