@@ -6,10 +6,12 @@ ROS_DOMAIN_ID, and, with --switches N, hands control back and forth N times, one
 every --every simulated seconds, through the sim's standard ``set_parameters`` service from
 one client node that joined before tick 0 (what `hexapod switch` does, without a new
 process per switch), or with --via tool by running scripts/switch_controller.sh (a new
-process per switch, through the sim's local switch channel: what a user does). From the
-bag it counts, per switch, the ticks from the one before the switch to 3 after it that no
-command of the controller named in the state answered (late or not): a switch with any
-such tick *lost a tick*. It also prints the share of ticks whose command arrived within
+process per switch, through the sim's local switch channel: what a user does), or
+with --via channel through that channel from this process (no process per switch). For each
+switch the sim logged, it counts from the bag the ticks from the one before the switch to 3
+after it that no command of the controller named in the state answered (late or not): a
+switch with any such tick *lost a tick* (a state missing from the bag counts as lost; each
+line gives the bag's count of states against the sim's). It also prints the share of ticks whose command arrived within
 its period, with and without switching.
 
 --hog adds one CPU hog (a busy loop in its own process) beside the graph. The control path
@@ -22,7 +24,7 @@ status messages in each bag it prints the share of on-time ticks before and afte
 moment, so a dead idle controller's cost shows against the same run without a kill.
 
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
-       [--rt-priority 20] [--via service|tool]
+       [--rt-priority 20] [--via service|tool|channel]
        [--no-baseline] [--kill-idle S] [--keep DIR]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
@@ -43,6 +45,9 @@ from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
 ALL = "trajectory_generator,pd_p_controller,pd_pf_controller,metrics,bench_switch"
+#: What each --via switches through (the benchmark's first line).
+VIA = {"service": "set_parameters", "tool": "switch_controller.sh",
+       "channel": "the sim's local switch channel"}
 SUMMARY = re.compile(r"stopped at tick (\d+) .*?: (\d+) missed, (\d+) late, (\d+) on time")
 
 
@@ -65,10 +70,15 @@ def _hog() -> None:
         pass
 
 
-def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
-               ) -> tuple[list[int], list[int]]:
-    """(switch ticks, lost ticks per switch) from a bag of the graph; with ``at``, the same
-    count around those ticks instead (the baseline of a run without switches)."""
+#: The sim's log line of each switch (sim_node.py): the tick the new controller took over.
+SWITCHED = re.compile(r"switched \w+ -> \w+ at tick (\d+)")
+
+
+def lost_ticks(bag: Path, period_ns: int, at: list[int]) -> tuple[list[int], int, int]:
+    """(lost ticks per switch, states in the bag, states expected) around the switch ticks
+    ``at`` (the sim's, or the same schedule in a run without switches): the ticks from the
+    one before to 3 after that no command of the controller named in the state answered.
+    A tick whose state is not in the bag counts as lost (the states' count says why)."""
     from hexapod_metrics.bag import open_bag
     from hexapod_sim.runtime import conversions as C
     from hexapod_sim.core import topics as T
@@ -84,11 +94,9 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int] | None = None
                 out[C.tick_of(msg.stamp_ns, period_ns)] = in_charge(msg.frame_id)
     states, commands = frames[T.JOINT_STATES], frames[T.JOINT_COMMANDS]
     n = max(states)
-    switches = at if at is not None else [k for k in range(1, n + 1)
-                                          if states.get(k) != states.get(k - 1)]
-    lost = [sum(1 for j in range(s - 1, min(n, s + 4)) if commands.get(j) != states.get(j))
-            for s in switches]
-    return switches, lost
+    lost = [sum(1 for j in range(s - 1, min(n, s + 4))
+                if j not in states or commands.get(j) != states[j]) for s in at]
+    return lost, len(states), n + 1
 
 
 def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
@@ -189,6 +197,19 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
                 if done.returncode and g.procs["hexapod_sim"].poll() is None:
                     raise RuntimeError(f"switch_controller.sh {target}: {done.stderr.strip()}"
                                        f"\n--- the sim's log:\n{g.log('hexapod_sim')[-3000:]}")
+            elif args.via == "channel":
+                if g.procs["hexapod_sim"].poll() is not None:
+                    break
+                from hexapod_sim.core.switch_channel import ChannelError, request
+
+                try:
+                    answer = request(f"switch {target}", domain, 30)
+                except ChannelError:
+                    answer = "no answer"
+                if g.procs["hexapod_sim"].poll() is not None:
+                    break  # the run ended meanwhile
+                if answer is None or not answer.startswith("ok"):
+                    raise RuntimeError(f"switch {target} through the sim's channel: {answer}")
             else:
                 value = ParameterValue(type=ParameterType.PARAMETER_STRING,
                                        string_value=target)
@@ -208,11 +229,11 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     ticks, missed, late, on_time = (int(x) for x in m.groups())
     period_ns = int(round(args.period * 1e9))
     # Without switches: the same windows at the same schedule, as the baseline.
-    at = None if switches else [int(round(i * args.every / args.period))
-                                for i in range(1, int(duration / args.every))]
-    done, lost = lost_ticks(log_dir / "bag", period_ns, at)
+    at = ([int(k) for k in SWITCHED.findall(g.log("hexapod_sim"))] if switches else
+          [int(round(i * args.every / args.period)) for i in range(1, int(duration / args.every))])
+    lost, recorded, expected = lost_ticks(log_dir / "bag", period_ns, at)
     out = {"ticks": ticks, "missed": missed, "late": late, "on_time": on_time,
-           "switches": len(done), "lost": lost}
+           "switches": len(at), "lost": lost, "recorded": recorded, "expected": expected}
     if kill_tick is not None:
         out["split"] = on_time_split(log_dir / "bag", kill_tick)
         out["kill_tick"] = kill_tick
@@ -231,9 +252,11 @@ def main() -> int:
     ap.add_argument("--rt-priority", type=int, default=20, dest="rt_priority",
                     help="SCHED_FIFO priority of the control path, as run_graph.sh --mode "
                     "realtime sets it (0 = normal scheduling)")
-    ap.add_argument("--via", choices=("service", "tool"), default="service",
+    ap.add_argument("--via", choices=("service", "tool", "channel"), default="service",
                     help="how to switch: the sim's set_parameters service from this process "
-                    "(default), or scripts/switch_controller.sh, a new process per switch")
+                    "(default), scripts/switch_controller.sh (a new process per switch), or "
+                    "the sim's local switch channel from this process (the path of "
+                    "`hexapod switch`, without a process per switch)")
     ap.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
                     help="graph mode (lockstep: compare real-time factors)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
@@ -251,7 +274,7 @@ def main() -> int:
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}"
           f"{', one CPU hog' if hog else ''}; {args.mode} mode, {1 / args.period:g} Hz, "
           f"control path under SCHED_FIFO {args.rt_priority} (0 = normal scheduling); "
-          f"switching through {'switch_controller.sh' if args.via == 'tool' else 'set_parameters'}")
+          f"switching through {VIA[args.via]}")
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:
         with _work_dir(args.keep) as tmp:
@@ -277,7 +300,8 @@ def main() -> int:
                 r = run(args, n, (base + i) % 101 + 1, Path(tmp) / f"run{i}")
                 pct = 100.0 * r["on_time"] / max(r["ticks"], 1)
                 line = (f"{label}: {r['ticks']} ticks, {pct:.2f} % on time, missed "
-                        f"{r['missed']}, late {r['late']}")
+                        f"{r['missed']}, late {r['late']}; bag: {r['recorded']} of "
+                        f"{r['expected']} states")
                 bad = sum(1 for x in r["lost"] if x)
                 if n:
                     line += (f"; switches {r['switches']} of {n}, switches with a lost tick: "

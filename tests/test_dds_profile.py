@@ -7,7 +7,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE,
+from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
                                              RESTART_PARTICIPANT_IDS, private_profile)
 
 NS = {"d": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
@@ -58,3 +58,13 @@ def test_the_shared_memory_transport_is_sized_and_checked_as_documented(tmp_path
     assert int(_shm(path).find("d:port_queue_capacity", NS).text) == PORT_QUEUE == 1024
     check = int(_shm(path).find("d:healthy_check_timeout_ms", NS).text)
     assert check == HEALTHY_CHECK_MS and 1000 < check < int(lease.text) * 1000
+
+
+def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):
+    from hexapod_sim.core.topics import CONTROL_DEPTH, HISTORY_DEPTH, RECORD_DEPTH
+
+    limits = ET.parse(private_profile(tmp_path)).getroot().find(
+        "d:profiles/d:data_reader/d:topic/d:resourceLimitsQos", NS)
+    assert int(limits.find("d:max_samples", NS).text) == READER_MAX_SAMPLES
+    assert int(limits.find("d:max_samples_per_instance", NS).text) == READER_MAX_SAMPLES
+    assert READER_MAX_SAMPLES >= max(RECORD_DEPTH, HISTORY_DEPTH, CONTROL_DEPTH)

@@ -20,6 +20,14 @@ PORT_QUEUE = 1024
 #: alive before declaring the port broken (Fast DDS's default: 1000; see below).
 HEALTHY_CHECK_MS = 3000
 
+#: Most samples a reader of the graph holds untaken. Fast DDS's default (5000) applies
+#: whatever the subscription's depth: a recorder that took nothing for a while (its main
+#: thread yields to the real-time control path) kept the first 5000 samples of a topic and
+#: lost every later one without a word (``RECORD_DEPTH`` is 10000; a realtime 1 kHz run of
+#: 10 s recorded 5000-5657 of its 10201 joint states, and the bags were reported complete).
+#: Above the graph's deepest queue (checked by tests/test_dds_profile.py).
+READER_MAX_SAMPLES = 20000
+
 #: Fast DDS profile of the graph's processes (used when discovery is localhost-only and no
 #: profile is set): a larger shared-memory segment and port queue (the defaults, 0.5 MB and
 #: 512 messages per process, filled up when one process stalled for ~0.1 s at 1 kHz, and
@@ -90,6 +98,12 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
       </times>
     </data_writer>
     <data_reader profile_name="hexapod_reader" is_default_profile="true">
+      <topic>
+        <resourceLimitsQos>
+          <max_samples>{READER_MAX_SAMPLES}</max_samples>
+          <max_samples_per_instance>{READER_MAX_SAMPLES}</max_samples_per_instance>
+        </resourceLimitsQos>
+      </topic>
       <times>
         <heartbeatResponseDelay><sec>0</sec><nanosec>0</nanosec></heartbeatResponseDelay>
       </times>
@@ -132,5 +146,6 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "HEALTHY_CHECK_MS", "PORT_QUEUE", "RESTART_PARTICIPANT_IDS",
+__all__ = ["FASTDDS_PROFILE", "HEALTHY_CHECK_MS", "PORT_QUEUE", "READER_MAX_SAMPLES",
+           "RESTART_PARTICIPANT_IDS",
            "private_profile"]
