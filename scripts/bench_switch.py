@@ -11,8 +11,8 @@ with --via channel through that channel from this process (no process per switch
 switch the sim logged, it counts from the bag the ticks from the one before the switch to 3
 after it that no command of the controller named in the state answered (late or not): a
 switch with any such tick *lost a tick* (a state missing from the bag counts as lost; each
-line gives the bag's count of states against the sim's). It also prints the share of ticks whose command arrived within
-its period, with and without switching.
+line gives the bag's count of states against the sim's). It also prints the share of ticks
+whose command arrived within its period, with and without switching.
 
 --hog adds one CPU hog (a busy loop in its own process) beside the graph. The control path
 runs under SCHED_FIFO at --rt-priority (default 20, as ``run_graph.sh --mode realtime``
