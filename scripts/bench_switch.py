@@ -144,6 +144,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     from rcl_interfaces.srv import SetParameters
 
     from hexapod_metrics.cmd_graph import GraphProcesses
+    from hexapod_sim.core.switch_channel import ChannelError, request
 
     duration = args.every * (switches + 1) if switches else args.duration
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
@@ -200,8 +201,6 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
             elif args.via == "channel":
                 if g.procs["hexapod_sim"].poll() is not None:
                     break
-                from hexapod_sim.core.switch_channel import ChannelError, request
-
                 try:
                     answer = request(f"switch {target}", domain, 30)
                 except ChannelError:

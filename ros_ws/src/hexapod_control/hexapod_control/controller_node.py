@@ -82,10 +82,8 @@ class ControllerNode(LifecycleNode):
         self.autostart = declare_node_param(self, "autostart")
         # SCHED_FIFO for the control path when asked (the launcher does in realtime mode),
         # at rt_priority whether in charge or not: with the idle controller one priority
-        # below (the design until 2026-12) it was starved past its CONTROL_DEPTH-deep state
-        # queue on a loaded machine and lost the ticks after a switch to it (28 of 195
-        # switches in 7 runs of bench_switch.py, against 2 of 120 at the same priority:
-        # docs/benchmarks.md).
+        # below (the design until 2026-12) it was starved on a loaded machine and lost the
+        # ticks after a switch to it more often (docs/benchmarks.md, sixth stop).
         self.rt = use_rt_priority(self, self.log)
         # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
         # /hexapod/status, so the bag records it with the sim time it happened at.
