@@ -56,6 +56,7 @@ from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
 
 from hexapod_sim.runtime import conversions as C
+from hexapod_sim.runtime import inputs_matched
 
 from .core.controllers import control_law, controller_code, gain_vector
 from .core.waits import InputWaits
@@ -98,6 +99,7 @@ class ControllerNode(LifecycleNode):
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
+        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
         self.js_codec = C.CODECS[T.JOINT_STATES]
         self.ff_codec = C.CODECS[T.FOOT_FORCES]
         self.ref_codec = C.CODECS[T.REFERENCE]

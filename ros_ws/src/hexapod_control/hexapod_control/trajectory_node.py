@@ -37,6 +37,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hexapod_sim.runtime import conversions as C
+from hexapod_sim.runtime import inputs_matched
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
 MAX_GAP = 10000  # ticks of missed clock messages filled in at most
@@ -69,6 +70,7 @@ class TrajectoryNode(Node):
         self.next_tick = 0  # first tick not yet published
         self.guard.publish_status(self.get_name(), lambda: self.window.newest or 0)
         self.loop = HotLoop(self)
+        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
         self.pub = self.create_publisher(JointState, T.REFERENCE,
                                          C.TOPIC_QOS[T.REFERENCE].publisher())
         self.signer = self.guard.signer(T.REFERENCE)

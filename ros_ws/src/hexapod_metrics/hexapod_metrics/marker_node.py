@@ -30,6 +30,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from hexapod_sim.runtime import conversions as C
+from hexapod_sim.runtime import inputs_matched
 
 from .core.figure import FORCE_SCALE, side, stick_figure
 
@@ -102,6 +103,7 @@ class MarkerNode(Node):
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.guard = InputGuard(self, self.get_logger())
         self.loop = HotLoop(self)
+        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
         self.signer = self.guard.signer(T.MARKERS)

@@ -38,6 +38,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 
 from hexapod_sim.runtime import conversions as C
+from hexapod_sim.runtime import inputs_matched
 from hexapod_sim.core import cdr
 from hexapod_sim.core.errors import CdrError
 
@@ -97,6 +98,7 @@ class MetricsNode(Node):
         self.counts = {t: 0 for t in TOPICS}
         self.guard.publish_status(self.get_name(), lambda: self.clock_ns)
         self.loop = HotLoop(self, batch_interval=batch)
+        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
         self.pub_indices = self.create_publisher(DiagnosticArray, T.INDICES,
                                                  C.TOPIC_QOS[T.INDICES].publisher())
         self.pub_status = self.create_publisher(DiagnosticArray, T.STATUS,

@@ -8,8 +8,9 @@ torque and integrates (lockstep / realtime, missed, held, fallback, switch: see 
 Around it: parameters (``run.controller`` through the same readiness check as ``hexapod
 switch``; ``switch_at``/``switch_to`` script a switch), the local switch channel,
 ``/hexapod/status`` every 0.5 s, the start (tick 0 once ``wait_for``'s nodes are matched,
-at most ``startup_timeout`` s) and the end summary (log, ``summary_path`` JSON). Exit codes:
-0, 1 (diverged, or another error), 2 (bad parameters).
+at most ``startup_timeout`` s, on both sides: each reader says so through its
+``inputs_matched`` service, runtime/inputs_matched.py) and the end summary (log,
+``summary_path`` JSON). Exit codes: 0, 1 (diverged, or another error), 2 (bad parameters).
 """
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ from .core.switch_channel import ChannelError, SwitchServer
 from .core import trace as _trace
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
 from .runtime.hot_loop import FastLogger, HotLoop
+from .runtime import inputs_matched
 from .runtime.input_guard import InputGuard
 from .runtime.node_main import run_node
 from .runtime.param_topic import ParamAnnouncer
@@ -56,6 +58,7 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 }
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
+INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
 
 
 class AfterSendLog:
@@ -275,6 +278,46 @@ class SimNode(Node):
             if state != "active":
                 self.log.warning(f"{name} is {state}: it answers only once active")
 
+    def _wait_inputs_matched(self) -> None:
+        """Wait (at most INPUTS_TIMEOUT s) until every node of ``wait_for`` that reads this
+        node's per-tick topics says its readers have matched our writers on its side
+        (runtime/inputs_matched.py: our side matching first is not enough, and the samples of
+        ticks sent before the other side matched were lost to it). Starts anyway, with an
+        error naming who is not ready, after the timeout."""
+        from std_srvs.srv import Trigger
+
+        names = [n for n in self.wait_for
+                 if set(EXPECTED_ENDPOINTS.get(n, ((), ()))[0]) & set(inputs_matched.SIM_TOPICS)]
+        clients = {n: self.create_client(Trigger, f"/{n}/{inputs_matched.SERVICE}")
+                   for n in names}
+        self.loop.refresh()
+        waiting = {n: "no answer" for n in names}
+        asked: dict[str, Any] = {}
+
+        def ready() -> bool:
+            for name, client in clients.items():
+                if name not in waiting:
+                    continue
+                future = asked.get(name)
+                if future is None:
+                    if client.service_is_ready():
+                        asked[name] = client.call_async(Trigger.Request())
+                elif future.done():
+                    res = future.result()
+                    del asked[name]  # asked again at the next wake-up unless ready
+                    if res is not None and res.success:
+                        del waiting[name]
+                    elif res is not None:
+                        waiting[name] = f"readers of {res.message} not matched"
+            return not waiting
+        if not self.loop.spin(until=ready, timeout=INPUTS_TIMEOUT) and not self.loop.stopped:
+            self.log.error("starting although not every reader has matched this node's "
+                           "writers (its first ticks may be lost to it): " + "; ".join(
+                               f"{n}: {why}" for n, why in waiting.items()))
+        for client in clients.values():
+            self.destroy_client(client)
+        self.loop.refresh()
+
     def start(self) -> None:
         """Announce the controller in charge and publish tick 0 (after the graph is ready)."""
         self._announce()
@@ -291,6 +334,9 @@ class SimNode(Node):
                     f"{self.startup_timeout:g} s: check that those nodes run on this "
                     f"ROS_DOMAIN_ID)")
             self._check_controllers()
+            if self.loop.stopped:
+                return
+            self._wait_inputs_matched()
             if self.loop.stopped:
                 return
         self.log.info(

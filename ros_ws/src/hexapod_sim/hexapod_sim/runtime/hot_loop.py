@@ -156,6 +156,10 @@ class HotLoop:
         self._wait_set = None
         self.node.destroy_subscription(sub)
 
+    def subscriptions(self) -> list[Subscription]:
+        """The hot subscriptions, in the order they were made."""
+        return [e.sub for e in self._subs.values()]
+
     def refresh(self) -> None:
         """Rebuild the wait set (call after creating services, clients or timers)."""
         self._wait_set = None
