@@ -62,6 +62,9 @@ from .core.controllers import control_law, controller_code, gain_vector
 from .core.waits import InputWaits
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
+#: Stamps of unchecked inputs kept per topic while not in charge (beyond them, or for a second
+#: sample of a stamp, an input is checked on arrival as when in charge).
+MAX_UNCHECKED = 1000
 IDLE_DRAIN = 0.005  # s between two takes of the queued inputs while not in charge
 WARN_EVERY = 5.0  # wall s between two warnings about late inputs (the counts go on)
 WARN_AFTER = 10  # waits before the first warning (tick 0 always waits for the first reference)
@@ -110,6 +113,9 @@ class ControllerNode(LifecycleNode):
         self.in_charge = False  # named by the newest state
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
+        # Inputs taken while not in charge, not checked yet: stamp (as the data claims it)
+        # -> the serialized sample (see _on_input).
+        self.unchecked: dict[str, dict[int, bytes]] = {T.REFERENCE: {}, T.FOOT_FORCES: {}}
         # States of ours waiting for their reference or foot forces (answered, in order, as
         # soon as those are there, also after newer states: late beats never in realtime).
         self.pending: dict[int, C.JointStateView] = {}
@@ -201,6 +207,8 @@ class ControllerNode(LifecycleNode):
             self.pub = None
         self.refs.clear()
         self.forces.clear()
+        for held in self.unchecked.values():
+            held.clear()
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Remove publisher and subscriptions."""
@@ -217,20 +225,61 @@ class ControllerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _drain(self) -> None:
-        """Not in charge: take the queued references and foot forces (those of ticks before
-        the newest state are skipped unchecked)."""
+        """Not in charge: take the queued references and foot forces, kept unchecked (those
+        of ticks before the newest state are skipped, also among those kept)."""
         for topic in (T.REFERENCE, T.FOOT_FORCES):
             sub = self.subs.get(topic)
             if sub is not None:
                 self.loop.take(sub)
+            held = self.unchecked[topic]
+            for s in [s for s in held if 0 <= s < self.input_floor]:
+                del held[s]
+                self.skipped_inputs += 1
 
     # ------------------------------------------------------------------ per tick
     def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
         """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED);
-        one of a tick before the newest state is not needed, and not even checked."""
-        if 0 <= header_stamp(data) < self.input_floor:
+        one of a tick before the newest state is not needed, and not even checked.
+
+        Not in charge, a sample is kept unchecked (by the stamp it claims, one per stamp,
+        MAX_UNCHECKED stamps at most) and checked only once a state of ours needs it
+        (:meth:`_check_unchecked`): checking the ~5 ms of inputs an idle drain takes cost
+        0.2-0.5 ms, and a state that named this controller while a drain ran waited for it
+        (the switch tick's command came late at 20 of 50 switches at 1 kHz,
+        docs/benchmarks.md)."""
+        stamp = header_stamp(data)
+        if 0 <= stamp < self.input_floor:
             self.skipped_inputs += 1
             return
+        if not self.in_charge:
+            held = self.unchecked[topic]
+            if stamp not in held and len(held) < MAX_UNCHECKED:
+                held[stamp] = data
+                return
+        self._check_input(topic, buf, data)
+
+    def _check_unchecked(self, stamp: int | None = None) -> None:
+        """Check the inputs kept unchecked: those of tick ``stamp`` (ns), or all (None;
+        those of ticks before the newest state are skipped unchecked, as on arrival)."""
+        for topic, buf in ((T.REFERENCE, self.refs), (T.FOOT_FORCES, self.forces)):
+            held = self.unchecked[topic]
+            if stamp is not None:
+                data = held.pop(stamp, None)
+                if data is not None:
+                    self._check_input(topic, buf, data)
+                continue
+            if not held:
+                continue
+            items = sorted(held.items())
+            held.clear()
+            for s, data in items:
+                if 0 <= s < self.input_floor:
+                    self.skipped_inputs += 1
+                else:
+                    self._check_input(topic, buf, data)
+
+    def _check_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
+        """Check one input (the guard) and buffer it by stamp."""
         msg = self.guard.joint_state(topic, data, self.period_ns, self.window)
         if msg is None:
             return
@@ -265,6 +314,7 @@ class ControllerNode(LifecycleNode):
         mine = in_charge(js.frame_id) == self.arch and self.active
         self.in_charge = mine
         if mine and T.REFERENCE in self.subs:
+            self._check_unchecked(stamp)  # this tick's, kept while another was in charge
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
         elif self.loop.deadline is None:  # not ours: its inputs can wait a few ms
@@ -285,6 +335,7 @@ class ControllerNode(LifecycleNode):
         # state finds it checked; forget the inputs of answered ticks.
         if mine and T.REFERENCE in self.subs:
             self.loop.take(self.subs[T.REFERENCE])
+            self._check_unchecked()  # after a switch: the rest of what was kept unchecked
         keep = min(self.pending, default=stamp)
         for buf in (self.refs, self.forces):
             for s in [s for s in buf if s < keep]:
@@ -352,6 +403,7 @@ def _start(node: ControllerNode) -> None:
 
 
 def _finish(node: ControllerNode, code: int) -> int:
+    node._check_unchecked()  # what was kept unchecked is counted like the rest
     node.log.info(f"stopping after {node.answered} commands ({node.waits.text()}; "
                   f"{node.skipped_inputs} inputs of ticks no state needed skipped unchecked); "
                   f"inputs: {node.guard.summary()}")

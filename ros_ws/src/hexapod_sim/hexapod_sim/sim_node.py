@@ -423,9 +423,15 @@ class SimNode(Node):
 
     # ------------------------------------------------------------------ the machine's hooks
     def at_boundary(self, tick: int) -> None:
-        """Switch requests (local channel, scripted switch) at a tick boundary."""
+        """Switch requests (local channel, scripted switch) at a tick boundary.
+
+        The local channel is served once the next tick is out (``run_after_send``), in the
+        time the sim waits for that tick's command: a request's checks and parameter change
+        take ~0.2-0.8 ms of the sim's thread, which served here delayed the next tick's
+        states (the switch tick's command came late at 20 of 50 switches at 1 kHz,
+        docs/benchmarks.md). The switch then takes effect at the following boundary."""
         if self.channel is not None:
-            self._serve_channel()
+            self.after_send.append(self._serve_channel)
         if self.switch_to and tick * self.period >= self.switch_at - 1e-12:
             to, self.switch_to = self.switch_to, ""
             result = self.set_parameters([Parameter("run.controller", value=to)])[0]
