@@ -1,14 +1,18 @@
 """The graph's Fast DDS profile (hexapod_sim/runtime/dds_profile.py): private, well-formed,
-and with a fixed participant id for restarted processes."""
+and with a participant id of its own for restarted processes and tools (never a SIGKILLed
+process's)."""
 from __future__ import annotations
 
+import os
 import stat
 import xml.etree.ElementTree as ET
 
 import pytest
 
 from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
-                                             RESTART_PARTICIPANT_IDS, private_profile)
+                                             RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
+                                             domain_id_from_env, private_profile,
+                                             unicast_ports, unused_participant_id)
 
 NS = {"d": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
 
@@ -68,3 +72,40 @@ def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):
     assert int(limits.find("d:max_samples", NS).text) == READER_MAX_SAMPLES
     assert int(limits.find("d:max_samples_per_instance", NS).text) == READER_MAX_SAMPLES
     assert READER_MAX_SAMPLES >= max(RECORD_DEPTH, HISTORY_DEPTH, CONTROL_DEPTH)
+
+
+def test_unicast_ports_follow_the_rtps_port_mapping():
+    # Fast DDS's shared-memory port of domain 13's first participant is fastrtps_port10661
+    assert unicast_ports(13, 0) == (10660, 10661)
+    assert unicast_ports(0, 2) == (7414, 7415)
+
+
+def test_a_new_process_never_takes_a_participant_id_whose_ports_exist(tmp_path):
+    """A SIGKILLed process leaves its shared-memory ports behind; an id whose ports exist
+    (live or dead) is skipped, whichever of its two ports is there."""
+    ids = range(20, 24)
+    assert unused_participant_id(7, ids, tmp_path) == 20
+    (tmp_path / f"fastrtps_port{unicast_ports(7, 20)[1]}").touch()
+    (tmp_path / f"fastrtps_port{unicast_ports(7, 21)[0]}").touch()
+    (tmp_path / f"fastrtps_port{unicast_ports(8, 22)[1]}").touch()  # another domain's
+    assert unused_participant_id(7, ids, tmp_path) == 22
+    for i in ids:
+        (tmp_path / f"fastrtps_port{unicast_ports(7, i)[1]}").touch()
+    assert unused_participant_id(7, ids, tmp_path) is None
+
+
+def test_a_hand_started_process_writes_its_profile_with_an_unused_participant_id(
+        tmp_path, monkeypatch):
+    import hexapod_sim.runtime.dds_profile as dds
+    from hexapod_sim.runtime.hot_loop import configure_middleware
+
+    monkeypatch.setattr(dds, "SHM_DIR", tmp_path)
+    monkeypatch.setenv("ROS_DOMAIN_ID", "9")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.delenv("FASTRTPS_DEFAULT_PROFILES_FILE", raising=False)  # restored after
+    monkeypatch.setenv("RMW_FASTRTPS_PUBLICATION_MODE", "SYNCHRONOUS")
+    (tmp_path / f"fastrtps_port{unicast_ports(9, 20)[1]}").touch()  # a killed tool's
+    configure_middleware(TOOL_PARTICIPANT_IDS)
+    path = os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"]
+    assert _rtps(path).find("d:participantID", NS).text == "21"
+    assert domain_id_from_env({"ROS_DOMAIN_ID": " "}) == 0

@@ -31,7 +31,9 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.runtime.dds_profile import RESTART_PARTICIPANT_IDS, private_profile
+from hexapod_sim.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
+                                             domain_id_from_env, private_profile,
+                                             unused_participant_id)
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -113,7 +115,7 @@ class GraphProcesses:
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()
-        self._restart_ids = iter(RESTART_PARTICIPANT_IDS)
+        self._next_restart_id = RESTART_PARTICIPANT_IDS.start
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
@@ -140,8 +142,11 @@ class GraphProcesses:
         if name in self._started and self._private is not None:
             # A restart: a participant id of its own, not the previous process's (which
             # may have died by SIGKILL, leaving its shared-memory port behind).
-            participant = next(self._restart_ids, None)
+            participant = unused_participant_id(domain_id_from_env(self.env),
+                                                range(self._next_restart_id,
+                                                      RESTART_PARTICIPANT_IDS.stop))
             if participant is not None:
+                self._next_restart_id = participant + 1
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
                        str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
@@ -231,6 +236,9 @@ def _ros_node(name: str) -> Any:
     import rclpy
     from rclpy.node import Node
 
+    from hexapod_sim.runtime.hot_loop import configure_middleware
+
+    configure_middleware(TOOL_PARTICIPANT_IDS)  # not a just-killed node's participant id
     rclpy.init(args=[])
     return Node(f"{name}_{os.getpid()}", start_parameter_services=False)
 

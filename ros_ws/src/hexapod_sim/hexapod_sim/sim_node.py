@@ -59,6 +59,7 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
+INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
 class AfterSendLog:
@@ -293,18 +294,21 @@ class SimNode(Node):
         self.loop.refresh()
         waiting = {n: "no answer" for n in names}
         asked: dict[str, Any] = {}
+        next_ask = dict.fromkeys(names, 0.0)  # monotonic s: not asked again before
 
         def ready() -> bool:
+            now = time.monotonic()
             for name, client in clients.items():
                 if name not in waiting:
                     continue
                 future = asked.get(name)
                 if future is None:
-                    if client.service_is_ready():
+                    if now >= next_ask[name] and client.service_is_ready():
                         asked[name] = client.call_async(Trigger.Request())
                 elif future.done():
                     res = future.result()
-                    del asked[name]  # asked again at the next wake-up unless ready
+                    del asked[name]  # asked again after INPUTS_RETRY s unless ready
+                    next_ask[name] = now + INPUTS_RETRY
                     if res is not None and res.success:
                         del waiting[name]
                     elif res is not None:

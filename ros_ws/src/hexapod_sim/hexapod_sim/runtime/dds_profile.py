@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from typing import Mapping
 
 #: Port queue (messages) of every graph process's shared-memory port (see below).
 PORT_QUEUE = 1024
@@ -49,11 +50,11 @@ READER_MAX_SAMPLES = 20000
 #: every allocation (its ``recover_buffers``): the reason for a 1024-deep queue rather than
 #: 4096 (with a check longer than the lease, which ends the re-creation altogether, 4096
 #: kept the sim's CPU time ~25 % up for the rest of the run; 1024 showed no rise beyond the
-#: noise). A check longer than the lease was tried and dropped: the same check governs the
-#: port every participant of the domain listens on for discovery, and with 10 s `hexapod
-#: status` saw no node for 5 s after a controller's SIGKILL. With 3 s the re-creation
-#: starts later and lasts ~1 s (6062 `openat` calls) and a new process still discovers the
-#: graph within its 5 s (docs/benchmarks.md). Shorter leases were tried and dropped: with
+#: noise). A check longer than the lease was tried and dropped: with 10 s `hexapod status`
+#: saw no node for 5 s after a controller's SIGKILL (then thought to be the check; it was
+#: more likely the dead controller's participant id, which `hexapod status` took: see
+#: :func:`unused_participant_id`). With 3 s the re-creation starts later and lasts ~1 s
+#: (6062 `openat` calls; docs/benchmarks.md). Shorter leases were tried and dropped: with
 #: 1-2 s the dead controller cost 17-824 late ticks, but under a loaded lockstep run (a
 #: recorder joining) a live node was twice dropped by a peer whose lease ran out before its
 #: announcements were processed, and the peer never matched its endpoints again (possibly
@@ -117,6 +118,49 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 #: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
 #: (the unicast ports of id 125 would be the next domain's).
 RESTART_PARTICIPANT_IDS = range(60, 120)
+#: Participant ids of the project's command-line tools (``hexapod status``, ``hexapod
+#: switch``): between a graph's own ids and :data:`RESTART_PARTICIPANT_IDS`.
+TOOL_PARTICIPANT_IDS = range(20, 60)
+#: Participant ids of nodes started by hand (not by the graph launcher).
+HAND_PARTICIPANT_IDS = range(0, 120)
+#: Where Fast DDS keeps its shared-memory ports (``fastrtps_port<N>``).
+SHM_DIR = Path("/dev/shm")
+
+
+def unicast_ports(domain_id: int, participant_id: int) -> tuple[int, int]:
+    """The metatraffic and user-data unicast ports of a participant (RTPS 2.x port mapping
+    with its default constants: 7400 + 250 domain + 10 (or 11) + 2 participant); Fast DDS
+    names its shared-memory ports by them."""
+    base = 7400 + 250 * domain_id + 2 * participant_id
+    return base + 10, base + 11
+
+
+def unused_participant_id(domain_id: int, ids: range,
+                          shm_dir: Path | None = None) -> int | None:
+    """The first id of ``ids`` whose shared-memory ports do not exist in ``shm_dir``
+    (default :data:`SHM_DIR`); None if every one does.
+
+    Fast DDS gives a new participant the first id whose ports no live process holds, which
+    after a SIGKILL is the dead process's: its shared-memory ports are still there, as the
+    dead process left them, and the live participants still send to them until the dead
+    one's lease ends (5 s). A ``hexapod status`` started in that window took the id of a
+    controller killed just before and saw no /hexapod/status in 3 runs of 5 (sometimes no
+    node at all); with an id whose ports did not exist, 6 of 6 saw it within ~1.3 s.
+    A port file left by a live process or by one long dead both mean "taken"; two new
+    processes that pick the same id at once are harmless (Fast DDS moves the second one's
+    ports, as for an id a live process holds)."""
+    folder = SHM_DIR if shm_dir is None else shm_dir
+    for pid in ids:
+        if not any((folder / f"fastrtps_port{port}").exists()
+                   for port in unicast_ports(domain_id, pid)):
+            return pid
+    return None
+
+
+def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
+    """``ROS_DOMAIN_ID`` of ``env`` as rclpy reads it (0 when unset or empty)."""
+    value = env.get("ROS_DOMAIN_ID", "").strip()
+    return int(value) if value.isdigit() else 0
 
 
 def private_profile(directory: str | os.PathLike[str] | None = None,
@@ -146,6 +190,6 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "HEALTHY_CHECK_MS", "PORT_QUEUE", "READER_MAX_SAMPLES",
-           "RESTART_PARTICIPANT_IDS",
-           "private_profile"]
+__all__ = ["FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS", "HEALTHY_CHECK_MS", "PORT_QUEUE",
+           "READER_MAX_SAMPLES", "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS",
+           "domain_id_from_env", "private_profile", "unicast_ports", "unused_participant_id"]

@@ -63,7 +63,8 @@ from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 
 from ..core import trace
-from .dds_profile import FASTDDS_PROFILE, private_profile
+from .dds_profile import (FASTDDS_PROFILE, HAND_PARTICIPANT_IDS, domain_id_from_env,
+                          private_profile, unused_participant_id)
 
 RawCallback = Callable[[bytes], Any]  # ``newest`` subscriptions: True if accepted
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
@@ -399,20 +400,23 @@ class FastLogger:
         self._log(LoggingSeverity.ERROR, message)
 
 
-def configure_middleware() -> None:
+def configure_middleware(participant_ids: range = HAND_PARTICIPANT_IDS) -> None:
     """DDS settings of the graph's processes; call before ``rclpy.init``.
 
     Publication is synchronous and, with localhost-only discovery (the project's default),
     the Fast DDS profile :data:`FASTDDS_PROFILE` applies, written to a private file of this
-    process (never read from a shared, predictable path: see dds_profile.py); the
-    environment overrides both (``RMW_FASTRTPS_PUBLICATION_MODE``,
-    ``FASTRTPS_DEFAULT_PROFILES_FILE``, which the graph launcher sets to its own private
-    copy).
+    process (never read from a shared, predictable path: see dds_profile.py) with the first
+    participant id of ``participant_ids`` whose shared-memory ports do not exist (never a
+    SIGKILLed process's: see :func:`unused_participant_id`); the environment overrides both
+    (``RMW_FASTRTPS_PUBLICATION_MODE``, ``FASTRTPS_DEFAULT_PROFILES_FILE``, which the graph
+    launcher sets to its own private copy).
     """
     os.environ.setdefault("RMW_FASTRTPS_PUBLICATION_MODE", "SYNCHRONOUS")
     if (os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") == "LOCALHOST"
             and "FASTRTPS_DEFAULT_PROFILES_FILE" not in os.environ):
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(remove_at_exit=True))
+        participant = unused_participant_id(domain_id_from_env(), participant_ids)
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(
+            remove_at_exit=True, participant_id=participant))
 
 
 def init_rclpy(args: list[str] | None, node_name: str) -> bool:
