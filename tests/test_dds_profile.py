@@ -1,6 +1,6 @@
 """The graph's Fast DDS profile (hexapod_sim/runtime/dds_profile.py): private, well-formed,
 and with a participant id of its own for restarted processes and tools (never a SIGKILLed
-process's)."""
+process's, and after a SIGKILL not for other processes either: the fence)."""
 from __future__ import annotations
 
 import os
@@ -10,9 +10,11 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
-                                             RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
-                                             domain_id_from_env, private_profile,
-                                             unicast_ports, unused_participant_id)
+                                             RESTART_PARTICIPANT_IDS, SHM_DIR,
+                                             TOOL_PARTICIPANT_IDS, PortFence,
+                                             domain_id_from_env, shm_locks,
+                                             private_profile, unicast_ports,
+                                             unused_participant_id)
 
 NS = {"d": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
 
@@ -54,14 +56,13 @@ def _shm(path):
 
 def test_the_shared_memory_transport_is_sized_and_checked_as_documented(tmp_path):
     # dds_profile.py: the port queue bounds what a SIGKILLed reader leaves allocated in its
-    # senders; the port check (longer than Fast DDS's 1 s, shorter than the 5 s lease and
-    # than the 5 s `hexapod status` waits for the graph) shortens the port re-creation
-    # after such a kill without keeping new processes from discovering the graph.
+    # senders; the port check, longer than the lease, keeps the senders from re-creating a
+    # SIGKILLed reader's port at every sample until the lease drops that reader.
     path = private_profile(tmp_path)
     lease = _rtps(path).find("d:builtin/d:discovery_config/d:leaseDuration/d:sec", NS)
     assert int(_shm(path).find("d:port_queue_capacity", NS).text) == PORT_QUEUE == 1024
     check = int(_shm(path).find("d:healthy_check_timeout_ms", NS).text)
-    assert check == HEALTHY_CHECK_MS and 1000 < check < int(lease.text) * 1000
+    assert check == HEALTHY_CHECK_MS and check > int(lease.text) * 1000
 
 
 def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):
@@ -109,3 +110,66 @@ def test_a_hand_started_process_writes_its_profile_with_an_unused_participant_id
     path = os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"]
     assert _rtps(path).find("d:participantID", NS).text == "21"
     assert domain_id_from_env({"ROS_DOMAIN_ID": " "}) == 0
+
+
+def _locked_elsewhere(path):
+    import fcntl
+
+    with open(path, "rb") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return True
+        return False
+
+
+def test_the_fence_holds_free_shm_locks_and_leaves_taken_ones_alone(tmp_path):
+    import fcntl
+
+    free, taken = tmp_path / "fastrtps_port1_el", tmp_path / "fastrtps_port3_el"
+    free.touch()
+    taken.touch()
+    other = open(taken, "rb")
+    fcntl.flock(other, fcntl.LOCK_EX)  # a live listener
+    fence = PortFence()
+    try:
+        assert fence.hold([free, taken, tmp_path / "missing_el"]) == [free]
+        assert fence.held == [free]
+        assert _locked_elsewhere(free)  # a new participant cannot take that id
+        assert fence.hold([free]) == []  # held once
+    finally:
+        fence.release()
+        other.close()
+    assert fence.held == [] and not _locked_elsewhere(free)
+
+
+def test_shm_locks_are_the_shared_memory_lock_files_a_process_holds_open():
+    import subprocess
+    import sys
+
+    name = SHM_DIR / f"fastrtps_port{900000 + os.getpid()}_el"
+    child = subprocess.Popen([sys.executable, "-c",
+                              f"import sys, time; f = open({str(name)!r}, 'a'); "
+                              "g = open('/dev/null'); print('ready', flush=True); time.sleep(30)"],
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None and child.stdout.readline().strip() == "ready"
+        assert shm_locks(child.pid) == [name]
+    finally:
+        child.kill()
+        child.wait()
+        name.unlink(missing_ok=True)
+    assert shm_locks(child.pid) == []
+
+
+def test_released_with_remove_the_dead_ports_files_go(tmp_path):
+    lock = tmp_path / "fastrtps_port7411_el"
+    files = [tmp_path / "fastrtps_port7411", lock, tmp_path / "sem.fastrtps_port7411_mutex"]
+    segment = [tmp_path / "fastrtps_0c59c54c5ed398c8", tmp_path / "fastrtps_0c59c54c5ed398c8_el"]
+    other = tmp_path / "fastrtps_port7413"  # another port: not touched
+    for f in files + segment + [other]:
+        f.touch()
+    fence = PortFence()
+    assert fence.hold([lock, segment[1]]) == [lock, segment[1]]
+    fence.release(remove=True)
+    assert not any(f.exists() for f in files + segment) and other.exists()

@@ -44,6 +44,51 @@ def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_g
     assert "1 fallback episodes" in g.log("hexapod_sim")
 
 
+#: What `ros2 param get /hexapod_sim run.controller` does, as a process of its own with
+#: Fast DDS's default profile (not the graph's): the answer, or a one-line reason.
+PARAM_GET = """
+import sys, time, rclpy
+from rcl_interfaces.srv import GetParameters
+rclpy.init()
+node = rclpy.create_node("param_get_probe")
+client = node.create_client(GetParameters, "/hexapod_sim/get_parameters")
+if not client.wait_for_service(timeout_sec=10):
+    sys.exit("no /hexapod_sim/get_parameters within 10 s")
+future = client.call_async(GetParameters.Request(names=["run.controller"]))
+rclpy.spin_until_future_complete(node, future, timeout_sec=10)
+if future.result() is None:
+    sys.exit("/hexapod_sim/get_parameters did not answer within 10 s")
+print(future.result().values[0].string_value)
+"""
+
+
+def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
+    """A process with Fast DDS's own profile (what the `ros2` tools are) takes the first
+    participant id whose shared-memory ports nobody listens on: after a SIGKILL, the dead
+    node's, whose ports the graph keeps as the dead process left them (dds_profile.py). It
+    saw nothing of the graph for 20 s and more (0 of 17 runs answered) until the launcher
+    held those ports' locks (PortFence); now it takes another id and gets its answer."""
+    import os
+    import subprocess
+    import sys
+
+    g = make_graph()
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller",
+            "sim.lockstep_timeout:=0.2")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    assert g.kill("pd_pf_controller", signal.SIGKILL) == -signal.SIGKILL
+    assert g.fenced(), "no port of the killed controller is held"
+    env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
+    env |= {"ROS_DOMAIN_ID": str(g.domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    probe = subprocess.run([sys.executable, "-c", PARAM_GET], env=env, capture_output=True,
+                           text=True, timeout=60)
+    assert probe.returncode == 0, probe.stderr
+    assert probe.stdout.strip() == "pd_pf"
+    assert g.stop("hexapod_sim") == 0
+
+
 def test_a_controller_says_which_input_it_waited_for_and_what_it_gave_up(make_graph):
     """No trajectory generator: every state of the controller in charge waits for its
     reference. The controller says so in a warning (not for tick 0 alone, which always

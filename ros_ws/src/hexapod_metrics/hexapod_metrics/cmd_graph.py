@@ -13,7 +13,12 @@ with ``--ros-args``), keeps their logs, and stops them (SIGINT, then SIGTERM, th
 SIGKILL); the graph launcher (graph_launcher.py, ``scripts/run_graph.sh``), the benchmark
 and soak scripts and the graph tests use it. Every node it starts dies with it
 (``PR_SET_PDEATHSIG``, lifeline.py), and with localhost-only discovery the nodes read a Fast
-DDS profile written privately for this graph (dds_profile.py), never a shared file.
+DDS profile written privately for this graph (dds_profile.py), never a shared file. It
+gives each node a participant id whose shared-memory ports do not exist. When one of its
+nodes dies by a signal (no goodbye to the others), it holds the listener locks of that
+node's shared-memory ports until the graph is stopped, so that no process started
+meanwhile (``ros2 node list``) takes the dead node's participant id, and then deletes
+those ports (dds_profile.PortFence).
 """
 from __future__ import annotations
 
@@ -31,9 +36,10 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
-                                             domain_id_from_env, private_profile,
-                                             unused_participant_id)
+from hexapod_sim.runtime.dds_profile import (GRAPH_PARTICIPANT_IDS, RESTART_PARTICIPANT_IDS,
+                                             TOOL_PARTICIPANT_IDS,
+                                             PortFence, domain_id_from_env, shm_locks,
+                                             private_profile, unused_participant_id)
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -115,7 +121,9 @@ class GraphProcesses:
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()
-        self._next_restart_id = RESTART_PARTICIPANT_IDS.start
+        self._next_id = {False: GRAPH_PARTICIPANT_IDS, True: RESTART_PARTICIPANT_IDS}
+        self._locks: dict[str, list[Path]] = {}
+        self._fence = PortFence()
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
@@ -139,14 +147,15 @@ class GraphProcesses:
         for o in self.overrides + overrides:
             args += ["-p", o]
         env = self.env
-        if name in self._started and self._private is not None:
-            # A restart: a participant id of its own, not the previous process's (which
-            # may have died by SIGKILL, leaving its shared-memory port behind).
-            participant = unused_participant_id(domain_id_from_env(self.env),
-                                                range(self._next_restart_id,
-                                                      RESTART_PARTICIPANT_IDS.stop))
+        if self._private is not None:
+            # A participant id whose shared-memory ports do not exist (not a SIGKILLed
+            # process's, which are kept as it left them: dds_profile.py); a restart's
+            # above every first start's.
+            restart = name in self._started
+            ids = self._next_id[restart]
+            participant = unused_participant_id(domain_id_from_env(self.env), ids)
             if participant is not None:
-                self._next_restart_id = participant + 1
+                self._next_id[restart] = range(participant + 1, ids.stop)
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
                        str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
@@ -155,6 +164,27 @@ class GraphProcesses:
         self.procs[name] = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT,
                                             env=env, start_new_session=True)
         return self.procs[name]
+
+    def poll(self, name: str) -> int | None:
+        """The exit code of process ``name``, None while it runs. While it runs, notes the
+        listener locks of its shared-memory ports; once it has died by a signal, holds them
+        (:meth:`fenced`)."""
+        proc = self.procs[name]
+        code = proc.poll()
+        if code is None:
+            self._locks[name] = shm_locks(proc.pid) or self._locks.get(name, [])
+        else:
+            self._ended(name, code)
+        return code
+
+    def _ended(self, name: str, code: int) -> None:
+        if code < 0:  # no goodbye: keep new participants off its ports' ids
+            self._fence.hold(self._locks.get(name, ()))
+        self._locks.pop(name, None)
+
+    def fenced(self) -> list[Path]:
+        """The listener locks held for nodes of this graph that died by a signal."""
+        return self._fence.held
 
     def log(self, name: str) -> str:
         """The log of process ``name`` so far."""
@@ -193,6 +223,7 @@ class GraphProcesses:
         proc = self.procs.get(name)
         if proc is None:
             return None
+        self.poll(name)
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
             if proc.poll() is not None:
                 break
@@ -204,6 +235,7 @@ class GraphProcesses:
             except ProcessLookupError:
                 break
         code = proc.wait()
+        self._ended(name, code)
         self._logs.pop(name).close()
         del self.procs[name]
         return code
@@ -211,8 +243,10 @@ class GraphProcesses:
     def kill(self, name: str, sig: int = signal.SIGKILL) -> int:
         """Send ``sig`` and wait for the end; the exit code."""
         proc = self.procs[name]
+        self.poll(name)
         proc.send_signal(sig)
         code = proc.wait(30)
+        self._ended(name, code)
         self._logs.pop(name).close()
         del self.procs[name]
         return code
@@ -226,6 +260,7 @@ class GraphProcesses:
         if self._private is not None:
             shutil.rmtree(self._private, ignore_errors=True)
             self._private = None
+        self._fence.release(remove=True)  # no sender of this graph is left to use them
         return codes
 
 

@@ -333,9 +333,9 @@ class Launcher:
         assert g is not None
         seen: set[str] = set()
         while self.stop_signal is None:
-            sim = g.procs["hexapod_sim"].poll()
-            for name, proc in list(g.procs.items()):
-                code = proc.poll()
+            sim = g.poll("hexapod_sim")
+            for name in list(g.procs):
+                code = g.poll(name)
                 if code is None or name in seen or name == "hexapod_sim":
                     continue
                 seen.add(name)

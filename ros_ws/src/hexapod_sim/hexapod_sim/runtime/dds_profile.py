@@ -9,17 +9,19 @@ writes it into a fresh directory of its own (``mkdtemp``: mode 0700, owner only)
 from __future__ import annotations
 
 import atexit
+import contextlib
+import fcntl
 import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Mapping
+from typing import IO, Iterable, Mapping
 
 #: Port queue (messages) of every graph process's shared-memory port (see below).
 PORT_QUEUE = 1024
 #: How long (ms) a sender waits for the listeners of a shared-memory port to show they are
 #: alive before declaring the port broken (Fast DDS's default: 1000; see below).
-HEALTHY_CHECK_MS = 3000
+HEALTHY_CHECK_MS = 10000
 
 #: Most samples a reader of the graph holds untaken. Fast DDS's default (5000) applies
 #: whatever the subscription's depth: a recorder that took nothing for a while (its main
@@ -44,22 +46,35 @@ READER_MAX_SAMPLES = 20000
 #: port broken (no sign of its listener for the health check's time), every sample sent to
 #: it re-creates the port (open, mmap, munmap): with Fast DDS's 1 s check, ~28000-34000
 #: `openat` calls in the sim from ~1.5 s after an idle controller's SIGKILL until its lease
-#: ended, the sim's CPU time up ~90 % meanwhile (on time 79-83 % after the kill against 95 %
-#: before, at 500 Hz on a slow day). Before that, the port's queue fills up and each buffer
-#: it holds stays allocated in the sender's shared-memory segment, which Fast DDS walks at
-#: every allocation (its ``recover_buffers``): the reason for a 1024-deep queue rather than
-#: 4096 (with a check longer than the lease, which ends the re-creation altogether, 4096
-#: kept the sim's CPU time ~25 % up for the rest of the run; 1024 showed no rise beyond the
-#: noise). A check longer than the lease was tried and dropped: with 10 s `hexapod status`
-#: saw no node for 5 s after a controller's SIGKILL (then thought to be the check; it was
-#: more likely the dead controller's participant id, which `hexapod status` took: see
-#: :func:`unused_participant_id`). With 3 s the re-creation starts later and lasts ~1 s
-#: (6062 `openat` calls; docs/benchmarks.md). Shorter leases were tried and dropped: with
-#: 1-2 s the dead controller cost 17-824 late ticks, but under a loaded lockstep run (a
-#: recorder joining) a live node was twice dropped by a peer whose lease ran out before its
-#: announcements were processed, and the peer never matched its endpoints again (possibly
-#: the shared-memory port reuse that :func:`private_profile` now avoids for restarts, which
-#: was not known then).
+#: ended, the sim's CPU time up ~90 % meanwhile; with a 3 s check (the previous profile)
+#: ~6000, and 92.7-98.7 % of the ticks after the kill on time at 1 kHz against 99.95-99.97 %
+#: without it. The check is therefore longer than the lease (:data:`HEALTHY_CHECK_MS`): the
+#: dead reader is dropped before any watchdog fires, and a kill costs the loop nothing
+#: measurable (99.99-100.00 % on time after it, three runs; docs/benchmarks.md). Meanwhile
+#: the port's queue fills up and each buffer it holds stays allocated in the sender's
+#: shared-memory segment, which Fast DDS walks at every allocation (its
+#: ``recover_buffers``): the reason for a 1024-deep queue rather than 4096 (which kept the
+#: sim's CPU time ~25 % up for the rest of the run; 1024 showed no rise beyond the noise).
+#:
+#: The price: the dead port stays as the dead process left it (full, and cached by its
+#: senders, whose watchdog only flags it once a sample has waited for the 10 s check), so no
+#: new process may take the dead one's participant id while the graph runs. The launcher
+#: gives the graph's processes, and the graph's tools take, ids whose ports do not exist
+#: (:data:`GRAPH_PARTICIPANT_IDS`, :func:`unused_participant_id`); any other process
+#: (``ros2 node list``, an rclpy script) picks the first id whose ports' listener locks are
+#: free, which after a SIGKILL is the dead one's, and then saw nothing of the graph for 20 s
+#: and more. The launcher therefore holds the locks of the ports of every node of its that
+#: died by a signal (:class:`PortFence`), and deletes those ports once the graph is stopped;
+#: such a process skips the id (Fast DDS prints one ``Failed init_port ...
+#: open_and_lock_file failed`` line for it). A 10 s check was on
+#: main once before and dropped because `hexapod status` saw no node after a SIGKILL; that
+#: was the participant id `hexapod status` took, fixed since.
+#:
+#: Shorter leases were tried and dropped: with 1-2 s the dead controller cost 17-824 late
+#: ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
+#: by a peer whose lease ran out before its announcements were processed, and the peer
+#: never matched its endpoints again (possibly the shared-memory port reuse that
+#: :func:`private_profile` now avoids for restarts, which was not known then).
 FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -114,9 +129,12 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
-#: Participant ids given to restarted processes (:func:`private_profile`): above the ids
-#: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
-#: (the unicast ports of id 125 would be the next domain's).
+#: Participant ids the launcher gives the processes of a graph (:func:`private_profile`),
+#: in start order, skipping ids whose shared-memory ports exist (left by a SIGKILLed
+#: process of an earlier run, say).
+GRAPH_PARTICIPANT_IDS = range(0, 20)
+#: Participant ids given to restarted processes: above the others, below 120 (the unicast
+#: ports of id 125 would be the next domain's).
 RESTART_PARTICIPANT_IDS = range(60, 120)
 #: Participant ids of the project's command-line tools (``hexapod status``, ``hexapod
 #: switch``): between a graph's own ids and :data:`RESTART_PARTICIPANT_IDS`.
@@ -143,7 +161,8 @@ def unused_participant_id(domain_id: int, ids: range,
     Fast DDS gives a new participant the first id whose ports no live process holds, which
     after a SIGKILL is the dead process's: its shared-memory ports are still there, as the
     dead process left them, and the live participants still send to them until the dead
-    one's lease ends (5 s). A ``hexapod status`` started in that window took the id of a
+    one's lease ends (5 s), and keep them as they are after that (see
+    :data:`FASTDDS_PROFILE`). A ``hexapod status`` started in that window took the id of a
     controller killed just before and saw no /hexapod/status in 3 runs of 5 (sometimes no
     node at all); with an id whose ports did not exist, 6 of 6 saw it within ~1.3 s.
     A port file left by a live process or by one long dead both mean "taken"; two new
@@ -155,6 +174,76 @@ def unused_participant_id(domain_id: int, ids: range,
                    for port in unicast_ports(domain_id, pid)):
             return pid
     return None
+
+
+def shm_locks(pid: int, proc_dir: Path = Path("/proc")) -> list[Path]:
+    """The lock files (``<SHM_DIR>/fastrtps_*_el``) that live process ``pid`` holds open:
+    one per shared-memory port it listens on (``fastrtps_port<N>_el``) and one for its own
+    segment. Empty if the process is gone (or has no participant yet)."""
+    found = []
+    try:
+        fds = list((proc_dir / str(pid) / "fd").iterdir())
+    except OSError:
+        return []
+    for fd in fds:
+        try:
+            target = Path(os.readlink(fd))
+        except OSError:
+            continue
+        if target.parent == SHM_DIR and target.name.startswith("fastrtps_") \
+                and target.name.endswith("_el"):
+            found.append(target)
+    return sorted(set(found))
+
+
+class PortFence:
+    """Holds the locks of shared-memory ports whose listener was killed (and of its
+    segment), so that no new participant takes them (see :data:`FASTDDS_PROFILE`): a process
+    that finds the lock of an id's port taken moves on to the next id. Released by
+    :meth:`release` (or with the process that holds it)."""
+
+    def __init__(self) -> None:
+        self._held: dict[Path, IO[bytes]] = {}
+
+    def hold(self, locks: Iterable[Path]) -> list[Path]:
+        """Take the free ones of ``locks`` (exclusive, non-blocking); those now held. A
+        lock another process holds (a live listener, or a process that took the id in the
+        meantime) is left alone."""
+        taken = []
+        for path in locks:
+            if path in self._held:
+                continue
+            try:
+                f = open(path, "rb")
+            except OSError:
+                continue
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.close()
+                continue
+            self._held[path] = f
+            taken.append(path)
+        return taken
+
+    @property
+    def held(self) -> list[Path]:
+        """The lock files held."""
+        return sorted(self._held)
+
+    def release(self, remove: bool = False) -> None:
+        """Let every lock go; with ``remove``, first delete their files (a port, its lock
+        and its mutex; a segment and its lock), once no process that used them is left: a
+        process that takes the id later then makes a fresh port instead of opening the dead
+        one, and the dead process's 8 MB segment does not stay in memory."""
+        for path, f in self._held.items():
+            if remove:
+                port = path.name[:-len("_el")]
+                for name in (port, path.name, f"sem.{port}_mutex"):
+                    with contextlib.suppress(OSError):
+                        (path.parent / name).unlink()
+            f.close()
+        self._held.clear()
 
 
 def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
@@ -190,6 +279,7 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS", "HEALTHY_CHECK_MS", "PORT_QUEUE",
-           "READER_MAX_SAMPLES", "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS",
-           "domain_id_from_env", "private_profile", "unicast_ports", "unused_participant_id"]
+__all__ = ["FASTDDS_PROFILE", "GRAPH_PARTICIPANT_IDS", "HAND_PARTICIPANT_IDS",
+           "HEALTHY_CHECK_MS", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
+           "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
+           "shm_locks", "private_profile", "unicast_ports", "unused_participant_id"]
