@@ -183,7 +183,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
             while time.monotonic() < start + kill_idle:
                 ex.spin_once(timeout_sec=0.01)
             if kill_idle > 0:
-                g.procs["pd_p_controller"].kill()  # pd_pf is in charge: pd_p is idle
+                g.kill("pd_p_controller")  # pd_pf is in charge: pd_p is idle
             kill_tick = int(round(clock_ns[0] * 1e-9 / args.period))  # the sim's, at the kill
         target = "pd_p"
         for i in range(switches):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import stat
+import time
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -12,7 +13,7 @@ import pytest
 from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
                                              RESTART_PARTICIPANT_IDS, SHM_DIR,
                                              TOOL_PARTICIPANT_IDS, PortFence,
-                                             domain_id_from_env, shm_locks,
+                                             domain_id_from_env, remove_dead_shm, shm_locks,
                                              private_profile, unicast_ports,
                                              unused_participant_id)
 
@@ -173,3 +174,34 @@ def test_released_with_remove_the_dead_ports_files_go(tmp_path):
     assert fence.hold([lock, segment[1]]) == [lock, segment[1]]
     fence.release(remove=True)
     assert not any(f.exists() for f in files + segment) and other.exists()
+
+
+def test_dead_ports_of_the_domain_and_dead_segments_are_removed_and_nothing_else(tmp_path):
+    import fcntl
+
+    def make(base, age=120.0):
+        for name in (base, f"{base}_el") + ((f"sem.{base}_mutex",) if "port" in base else ()):
+            (tmp_path / name).touch()
+            os.utime(tmp_path / name, (time.time() - age, time.time() - age))
+        return base
+
+    dead_port = make(f"fastrtps_port{unicast_ports(7, 3)[1]}")
+    dead_segment = make("fastrtps_0c59c54c5ed398c8")
+    other_domain = make(f"fastrtps_port{unicast_ports(8, 3)[1]}")
+    young = make(f"fastrtps_port{unicast_ports(7, 4)[1]}", age=1.0)
+    live = make(f"fastrtps_port{unicast_ports(7, 5)[1]}")
+    clean_exit = f"fastrtps_port{unicast_ports(7, 6)[1]}"  # Fast DDS leaves it, no lock
+    (tmp_path / clean_exit).touch()
+    holder = open(tmp_path / f"{live}_el", "rb")
+    fcntl.flock(holder, fcntl.LOCK_EX)
+    try:
+        removed = remove_dead_shm(7, shm_dir=tmp_path)
+    finally:
+        holder.close()
+    assert sorted(removed) == sorted([dead_port, dead_segment])
+    left = {p.name for p in tmp_path.iterdir()}
+    assert not any(n.startswith(dead_port) or n.startswith(dead_segment)
+                   or n == f"sem.{dead_port}_mutex" for n in left)
+    for kept in (other_domain, young, live):
+        assert {kept, f"{kept}_el", f"sem.{kept}_mutex"} <= left
+    assert clean_exit in left

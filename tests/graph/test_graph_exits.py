@@ -260,7 +260,7 @@ def test_a_killed_idle_controller_leaves_the_graph_within_its_lease(make_graph):
         end = time.monotonic() + 60
         while "pd_p_controller" not in node.get_node_names() and time.monotonic() < end:
             time.sleep(0.05)
-        g.procs["pd_p_controller"].kill()  # pd_pf is in charge: pd_p is idle
+        g.kill("pd_p_controller")  # pd_pf is in charge: pd_p is idle
         killed = time.monotonic()
         while "pd_p_controller" in node.get_node_names() and time.monotonic() < killed + 15:
             time.sleep(0.05)

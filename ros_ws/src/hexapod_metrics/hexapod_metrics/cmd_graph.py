@@ -39,7 +39,8 @@ from hexapod_sim.core.params import CONTROLLERS
 from hexapod_sim.runtime.dds_profile import (GRAPH_PARTICIPANT_IDS, RESTART_PARTICIPANT_IDS,
                                              TOOL_PARTICIPANT_IDS,
                                              PortFence, domain_id_from_env, shm_locks,
-                                             private_profile, unused_participant_id)
+                                             private_profile, remove_dead_shm,
+                                             unused_participant_id)
 from hexapod_sim.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -118,6 +119,9 @@ class GraphProcesses:
             self._private = Path(tempfile.mkdtemp(prefix="hexapod_graph_"))
             self.env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(self._private))
             weakref.finalize(self, shutil.rmtree, self._private, True)
+            # Ports of this domain that a node killed in an earlier run left (full: a
+            # process that took such an id would hear nothing): gone before anyone does.
+            remove_dead_shm(domain_id_from_env(self.env))
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()

@@ -12,8 +12,10 @@ import atexit
 import contextlib
 import fcntl
 import os
+import re
 import shutil
 import tempfile
+import time
 from pathlib import Path
 from typing import IO, Iterable, Mapping
 
@@ -246,6 +248,41 @@ class PortFence:
         self._held.clear()
 
 
+def remove_dead_shm(domain_id: int, min_age: float = 60.0,
+                    shm_dir: Path | None = None) -> list[str]:
+    """Delete the shared-memory ports of ``domain_id`` and the segments (any domain) that a
+    process killed without cleaning up left behind: their lock file exists, nobody holds
+    its lock, and it is older than ``min_age`` s (a process creating its port takes the
+    lock right after creating the file). Such a port is full of what its dead listener
+    never took, and a process that takes its id later opens it as it is and hears nothing
+    until its senders give up on it (10 s: :data:`HEALTHY_CHECK_MS`). Files of other users
+    are left alone. The names of the ports and segments removed."""
+    folder = SHM_DIR if shm_dir is None else shm_dir
+    ports = {f"fastrtps_port{port}" for pid in range(125)
+             for port in unicast_ports(domain_id, pid)}
+    fence = PortFence()
+    removed = []
+    try:
+        locks = list(folder.glob("fastrtps_*_el"))
+    except OSError:
+        return []
+    now = time.time()
+    for lock in locks:
+        base = lock.name[:-len("_el")]
+        if base not in ports and not re.fullmatch(r"fastrtps_[0-9a-f]{16}", base):
+            continue
+        try:
+            info = lock.stat()
+        except OSError:
+            continue
+        if now - info.st_mtime < min_age or info.st_uid != os.getuid():
+            continue
+        if fence.hold([lock]):
+            removed.append(base)
+    fence.release(remove=True)
+    return removed
+
+
 def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
     """``ROS_DOMAIN_ID`` of ``env`` as rclpy reads it (0 when unset or empty)."""
     value = env.get("ROS_DOMAIN_ID", "").strip()
@@ -282,4 +319,5 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
 __all__ = ["FASTDDS_PROFILE", "GRAPH_PARTICIPANT_IDS", "HAND_PARTICIPANT_IDS",
            "HEALTHY_CHECK_MS", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
            "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
-           "shm_locks", "private_profile", "unicast_ports", "unused_participant_id"]
+           "private_profile", "remove_dead_shm", "shm_locks", "unicast_ports",
+           "unused_participant_id"]
