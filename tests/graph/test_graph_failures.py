@@ -47,18 +47,28 @@ def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_g
 #: What `ros2 param get /hexapod_sim run.controller` does, as a process of its own with
 #: Fast DDS's default profile (not the graph's): the answer, or a one-line reason.
 PARAM_GET = """
-import sys, time, rclpy
+import os, sys, time, rclpy
 from rcl_interfaces.srv import GetParameters
+from hexapod_sim.runtime.dds_profile import shm_locks
 rclpy.init()
 node = rclpy.create_node("param_get_probe")
+ports = lambda: [p.name for p in shm_locks(os.getpid())]
 client = node.create_client(GetParameters, "/hexapod_sim/get_parameters")
 if not client.wait_for_service(timeout_sec=10):
-    sys.exit("no /hexapod_sim/get_parameters within 10 s")
-future = client.call_async(GetParameters.Request(names=["run.controller"]))
-rclpy.spin_until_future_complete(node, future, timeout_sec=10)
-if future.result() is None:
-    sys.exit("/hexapod_sim/get_parameters did not answer within 10 s")
-print(future.result().values[0].string_value)
+    sys.exit(f"no /hexapod_sim/get_parameters within 10 s (nodes seen: "
+             f"{node.get_node_names()}; own ports: {ports()})")
+# A request sent before the server's reply writer has matched this client's reply reader
+# is answered into the void (a race of every ROS 2 service client, not of this graph):
+# ask again, as a user runs `ros2 param get` again; a dead port would fail every time.
+for attempt in range(3):
+    future = client.call_async(GetParameters.Request(names=["run.controller"]))
+    rclpy.spin_until_future_complete(node, future, timeout_sec=5)
+    if future.result() is not None:
+        print(future.result().values[0].string_value, "attempt", attempt + 1)
+        break
+else:
+    sys.exit(f"/hexapod_sim/get_parameters did not answer 3 requests of 5 s each "
+             f"(own ports: {ports()})")
 """
 
 
@@ -66,11 +76,21 @@ def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
     """A process with Fast DDS's own profile (what the `ros2` tools are) takes the first
     participant id whose shared-memory ports nobody listens on: after a SIGKILL, the dead
     node's, whose ports the graph keeps as the dead process left them (dds_profile.py). It
-    saw nothing of the graph for 20 s and more (0 of 17 runs answered) until the launcher
-    held those ports' locks (PortFence); now it takes another id and gets its answer."""
+    saw nothing of the graph for 20 s and more (0 of 17 runs answered, started 0-14 s after
+    the kill) until the launcher held those ports' locks (PortFence); now it takes another
+    id and gets its answer. Whether the tool would take the dead id depends on what else
+    /dev/shm holds (a lower id left free by an earlier process is taken first), so the test
+    checks the fence itself (every lock file of the dead node held) and then the tool.
+    As a user would, the tool is run a second time if the first
+    one fails: in ~1 of 30 runs (also with no fence involved: it took a fresh id) the first
+    did not discover the sim within 10 s, cause not found (docs/benchmarks.md, eighth
+    stop); the dead-id trap fails every attempt."""
+    import fcntl
     import os
     import subprocess
     import sys
+
+    from hexapod_sim.runtime.dds_profile import shm_locks
 
     g = make_graph()
     g.start("trajectory_generator")
@@ -78,14 +98,28 @@ def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
     g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller",
             "sim.lockstep_timeout:=0.2")
     g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    dead = shm_locks(g.procs["pd_pf_controller"].pid)
+    assert any(p.name.startswith("fastrtps_port") for p in dead), dead
     assert g.kill("pd_pf_controller", signal.SIGKILL) == -signal.SIGKILL
-    assert g.fenced(), "no port of the killed controller is held"
+    # Each of the dead controller's lock files is held: no new participant takes its ids.
+    assert set(dead) <= set(g.fenced()), (dead, g.fenced())
+    for lock in dead:
+        with open(lock, "rb") as f:
+            with pytest.raises(BlockingIOError):
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
     env = {k: v for k, v in os.environ.items() if k != "FASTRTPS_DEFAULT_PROFILES_FILE"}
     env |= {"ROS_DOMAIN_ID": str(g.domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    probe = subprocess.run([sys.executable, "-c", PARAM_GET], env=env, capture_output=True,
-                           text=True, timeout=60)
-    assert probe.returncode == 0, probe.stderr
-    assert probe.stdout.strip() == "pd_pf"
+    failures = []
+    for _ in range(2):
+        probe = subprocess.run([sys.executable, "-c", PARAM_GET], env=env,
+                               capture_output=True, text=True, timeout=60)
+        if probe.returncode == 0:
+            break
+        failures.append(probe.stderr.strip())
+    assert probe.returncode == 0, (failures, [p.name for p in g.fenced()],
+                                   {n: [p.name for p in shm_locks(pr.pid)]
+                                    for n, pr in g.procs.items()})
+    assert probe.stdout.split()[0] == "pd_pf", probe.stdout
     assert g.stop("hexapod_sim") == 0
 
 
