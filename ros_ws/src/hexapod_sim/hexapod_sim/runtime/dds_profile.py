@@ -64,11 +64,11 @@ READER_MAX_SAMPLES = 20000
 #: gives the graph's processes, and the graph's tools take, ids whose ports do not exist
 #: (:data:`GRAPH_PARTICIPANT_IDS`, :func:`unused_participant_id`); any other process
 #: (``ros2 node list``, an rclpy script) picks the first id whose ports' listener locks are
-#: free, which after a SIGKILL is the dead one's, and then saw nothing of the graph for 20 s
-#: and more. The launcher therefore holds the locks of the ports of every node of its that
-#: died by a signal (:class:`PortFence`), and deletes those ports once the graph is stopped;
-#: such a process skips the id (Fast DDS prints one ``Failed init_port ...
-#: open_and_lock_file failed`` line for it). A 10 s check was on
+#: free, which after a SIGKILL is often the dead one's (unless a lower id is free), and then
+#: saw nothing of the graph for 20 s and more. The launcher therefore holds the locks of
+#: the ports of every node of its that died by a signal (:class:`PortFence`), and deletes
+#: those ports once the graph is stopped; such a process skips the id (Fast DDS prints one
+#: ``Failed init_port ... open_and_lock_file failed`` line for it). A 10 s check was on
 #: main once before and dropped because `hexapod status` saw no node after a SIGKILL; that
 #: was the participant id `hexapod status` took, fixed since.
 #:
