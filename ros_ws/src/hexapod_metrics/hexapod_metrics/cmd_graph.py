@@ -14,7 +14,7 @@ SIGKILL); the graph launcher (graph_launcher.py, ``scripts/run_graph.sh``), the 
 and soak scripts and the graph tests use it. Every node it starts dies with it
 (``PR_SET_PDEATHSIG``, lifeline.py), and with localhost-only discovery the nodes read a Fast
 DDS profile written privately for this graph (dds_profile.py), never a shared file. It
-gives each node a participant id whose shared-memory ports do not exist. When one of its
+gives a restarted node a participant id whose shared-memory ports do not exist. When one of its
 nodes dies by a signal (no goodbye to the others), it holds the listener locks of that
 node's shared-memory ports until the graph is stopped, so that no process started
 meanwhile (``ros2 node list``) takes the dead node's participant id, and then deletes
@@ -36,8 +36,7 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_sim.core.errors import HexapodError
 from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.runtime.dds_profile import (GRAPH_PARTICIPANT_IDS, RESTART_PARTICIPANT_IDS,
-                                             TOOL_PARTICIPANT_IDS,
+from hexapod_sim.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
                                              PortFence, domain_id_from_env, shm_locks,
                                              private_profile, remove_dead_shm,
                                              unused_participant_id)
@@ -125,7 +124,7 @@ class GraphProcesses:
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()
-        self._next_id = {False: GRAPH_PARTICIPANT_IDS, True: RESTART_PARTICIPANT_IDS}
+        self._restart_ids = RESTART_PARTICIPANT_IDS
         self._locks: dict[str, list[Path]] = {}
         self._fence = PortFence()
 
@@ -151,15 +150,16 @@ class GraphProcesses:
         for o in self.overrides + overrides:
             args += ["-p", o]
         env = self.env
-        if self._private is not None:
-            # A participant id whose shared-memory ports do not exist (not a SIGKILLed
-            # process's, which are kept as it left them: dds_profile.py); a restart's
-            # above every first start's.
-            restart = name in self._started
-            ids = self._next_id[restart]
-            participant = unused_participant_id(domain_id_from_env(self.env), ids)
+        if name in self._started and self._private is not None:
+            # A restart: a participant id whose shared-memory ports do not exist (not the
+            # previous process's, which may have died by SIGKILL: dds_profile.py). First
+            # starts keep Fast DDS's own choice: an explicit low id collided with processes
+            # that took theirs meanwhile (a test's client made between the Popen and the
+            # node's participant; once the sim lost sight of a controller).
+            participant = unused_participant_id(domain_id_from_env(self.env),
+                                                self._restart_ids)
             if participant is not None:
-                self._next_id[restart] = range(participant + 1, ids.stop)
+                self._restart_ids = range(participant + 1, self._restart_ids.stop)
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
                        str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)

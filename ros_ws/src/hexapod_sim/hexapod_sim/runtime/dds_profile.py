@@ -60,9 +60,9 @@ READER_MAX_SAMPLES = 20000
 #:
 #: The price: the dead port stays as the dead process left it (full, and cached by its
 #: senders, whose watchdog only flags it once a sample has waited for the 10 s check), so no
-#: new process may take the dead one's participant id while the graph runs. The launcher
-#: gives the graph's processes, and the graph's tools take, ids whose ports do not exist
-#: (:data:`GRAPH_PARTICIPANT_IDS`, :func:`unused_participant_id`); any other process
+#: new process may take the dead one's participant id while the graph runs. Restarted
+#: nodes and the graph's tools take ids whose ports do not exist
+#: (:func:`unused_participant_id`); any other process
 #: (``ros2 node list``, an rclpy script) picks the first id whose ports' listener locks are
 #: free, which after a SIGKILL is often the dead one's (unless a lower id is free), and then
 #: saw nothing of the graph for 20 s and more. The launcher therefore holds the locks of
@@ -131,12 +131,9 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
-#: Participant ids the launcher gives the processes of a graph (:func:`private_profile`),
-#: in start order, skipping ids whose shared-memory ports exist (left by a SIGKILLed
-#: process of an earlier run, say).
-GRAPH_PARTICIPANT_IDS = range(0, 20)
-#: Participant ids given to restarted processes: above the others, below 120 (the unicast
-#: ports of id 125 would be the next domain's).
+#: Participant ids given to restarted processes (:func:`private_profile`): above the ids
+#: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
+#: (the unicast ports of id 125 would be the next domain's).
 RESTART_PARTICIPANT_IDS = range(60, 120)
 #: Participant ids of the project's command-line tools (``hexapod status``, ``hexapod
 #: switch``): between a graph's own ids and :data:`RESTART_PARTICIPANT_IDS`.
@@ -316,7 +313,7 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "GRAPH_PARTICIPANT_IDS", "HAND_PARTICIPANT_IDS",
+__all__ = ["FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
            "HEALTHY_CHECK_MS", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
            "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
            "private_profile", "remove_dead_shm", "shm_locks", "unicast_ports",
