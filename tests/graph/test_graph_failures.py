@@ -17,13 +17,20 @@ from .bag_checks import mcap_size
 from .conftest import call, fast_params, hexapod_cli, ros_client, sim_summary
 
 
-def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_graph):
+def _lockstep_with_pd_pf(make_graph):
+    """A lockstep graph of the trajectory generator, PD-P&F and a sim that falls back after
+    0.2 s without commands; returned once ticking."""
     g = make_graph()
     g.start("trajectory_generator")
     g.start("pd_pf_controller")
     g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller",
             "sim.lockstep_timeout:=0.2")
     g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    return g
+
+
+def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_graph):
+    g = _lockstep_with_pd_pf(make_graph)
     assert g.kill("pd_pf_controller", signal.SIGKILL) == -signal.SIGKILL
     g.wait_log("hexapod_sim", "falling back to joint damping", timeout=60)
     assert g.procs["hexapod_sim"].poll() is None
@@ -92,12 +99,7 @@ def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
 
     from hexapod_sim.runtime.dds_profile import shm_locks
 
-    g = make_graph()
-    g.start("trajectory_generator")
-    g.start("pd_pf_controller")
-    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_pf_controller",
-            "sim.lockstep_timeout:=0.2")
-    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+    g = _lockstep_with_pd_pf(make_graph)
     dead = shm_locks(g.procs["pd_pf_controller"].pid)
     assert any(p.name.startswith("fastrtps_port") for p in dead), dead
     assert g.kill("pd_pf_controller", signal.SIGKILL) == -signal.SIGKILL
