@@ -133,10 +133,21 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
             rtf([r for r in started if r[0] > at_tick]))
 
 
+#: Wall s after the (possible) kill over which the sim's CPU time is taken: the lease.
+CPU_WINDOW = 5.0
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU time (s) process ``pid`` has used so far (/proc/<pid>/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
-        kill_idle: float | None = None) -> dict:
+        kill_idle: float | None = None, kill: bool = True) -> dict:
     """One realtime run; the sim's figures and the lost ticks of each switch (with
-    ``kill_idle``: the idle controller is killed that many wall s after tick 0)."""
+    ``kill_idle``: the idle controller is killed that many wall s after tick 0, unless not
+    ``kill``; either way the sim's CPU time over the next :data:`CPU_WINDOW` s is taken)."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -182,9 +193,17 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
         if kill_idle is not None:
             while time.monotonic() < start + kill_idle:
                 ex.spin_once(timeout_sec=0.01)
-            if kill_idle > 0:
+            sim_pid = g.procs["hexapod_sim"].pid
+            cpu0, at_kill = _cpu_seconds(sim_pid), time.monotonic()
+            if kill:
                 g.kill("pd_p_controller")  # pd_pf is in charge: pd_p is idle
             kill_tick = int(round(clock_ns[0] * 1e-9 / args.period))  # the sim's, at the kill
+            gone = None
+            while time.monotonic() < at_kill + CPU_WINDOW:
+                ex.spin_once(timeout_sec=0.01)
+                if kill and gone is None and "pd_p_controller" not in node.get_node_names():
+                    gone = time.monotonic() - at_kill
+            cpu = (_cpu_seconds(sim_pid) - cpu0) / (time.monotonic() - at_kill)
         target = "pd_p"
         for i in range(switches):
             due = start + (i + 1) * args.every
@@ -236,6 +255,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     if kill_tick is not None:
         out["split"] = on_time_split(log_dir / "bag", kill_tick)
         out["kill_tick"] = kill_tick
+        out["cpu"], out["gone"] = cpu, gone
     return out
 
 
@@ -277,7 +297,8 @@ def main() -> int:
     base = 170 + os.getpid() % 60
     if args.kill_idle is not None:
         with _work_dir(args.keep) as tmp:
-            base_run = run(args, 0, base % 101 + 1, Path(tmp) / "run0", kill_idle=0.0)
+            base_run = run(args, 0, base % 101 + 1, Path(tmp) / "run0",
+                           kill_idle=args.kill_idle, kill=False)
             killed = run(args, 0, (base + 1) % 101 + 1, Path(tmp) / "run1",
                          kill_idle=args.kill_idle)
             at = killed["kill_tick"]
@@ -287,7 +308,12 @@ def main() -> int:
                 print(f"{label}: {r['ticks']} ticks, {r['missed']} missed; before / after tick "
                       f"{at} (the kill, {args.kill_idle:g} wall s in): on time {b:.2f} % / "
                       f"{a:.2f} %, real-time factor (median of the sim's statuses) "
-                      f"{rb:.3f} / {ra:.3f}", flush=True)
+                      f"{rb:.3f} / {ra:.3f}; the sim's CPU use over the {CPU_WINDOW:g} s "
+                      f"from then {100 * r['cpu']:.0f} %" + (
+                          "" if r is base_run else
+                          "; the killed controller left this process's view of the graph "
+                          + (f"after more than {CPU_WINDOW:g} s" if r["gone"] is None
+                             else f"{r['gone']:.2f} s after the kill")), flush=True)
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return 0
     try:
