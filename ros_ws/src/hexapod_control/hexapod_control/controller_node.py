@@ -102,7 +102,7 @@ class ControllerNode(LifecycleNode):
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
-        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
+        inputs_matched.offer(self, self.loop.subscriptions, self.guard)  # asked before tick 0
         self.js_codec = C.CODECS[T.JOINT_STATES]
         self.ff_codec = C.CODECS[T.FOOT_FORCES]
         self.ref_codec = C.CODECS[T.REFERENCE]

@@ -70,7 +70,7 @@ class TrajectoryNode(Node):
         self.next_tick = 0  # first tick not yet published
         self.guard.publish_status(self.get_name(), lambda: self.window.newest or 0)
         self.loop = HotLoop(self)
-        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
+        inputs_matched.offer(self, self.loop.subscriptions, self.guard)  # asked before tick 0
         self.pub = self.create_publisher(JointState, T.REFERENCE,
                                          C.TOPIC_QOS[T.REFERENCE].publisher())
         self.signer = self.guard.signer(T.REFERENCE)

@@ -103,7 +103,7 @@ class MarkerNode(Node):
         self.pending: dict[int, dict[str, np.ndarray]] = {}
         self.guard = InputGuard(self, self.get_logger())
         self.loop = HotLoop(self)
-        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
+        inputs_matched.offer(self, self.loop.subscriptions, self.guard)  # asked before tick 0
         self.pub = self.create_publisher(MarkerArray, T.MARKERS,
                                          C.TOPIC_QOS[T.MARKERS].publisher())
         self.signer = self.guard.signer(T.MARKERS)

@@ -98,7 +98,7 @@ class MetricsNode(Node):
         self.counts = {t: 0 for t in TOPICS}
         self.guard.publish_status(self.get_name(), lambda: self.clock_ns)
         self.loop = HotLoop(self, batch_interval=batch)
-        inputs_matched.offer(self, self.loop.subscriptions)  # asked by the sim before tick 0
+        inputs_matched.offer(self, self.loop.subscriptions, self.guard)  # asked before tick 0
         self.pub_indices = self.create_publisher(DiagnosticArray, T.INDICES,
                                                  C.TOPIC_QOS[T.INDICES].publisher())
         self.pub_status = self.create_publisher(DiagnosticArray, T.STATUS,

@@ -289,7 +289,7 @@ class SimNode(Node):
 
         names = [n for n in self.wait_for
                  if set(EXPECTED_ENDPOINTS.get(n, ((), ()))[0]) & set(inputs_matched.SIM_TOPICS)]
-        clients = {n: self.create_client(Trigger, f"/{n}/{inputs_matched.SERVICE}")
+        clients = {n: self.create_client(Trigger, inputs_matched.service_name(n))
                    for n in names}
         self.loop.refresh()
         waiting = {n: "no answer" for n in names}
@@ -309,10 +309,14 @@ class SimNode(Node):
                     res = future.result()
                     del asked[name]  # asked again after INPUTS_RETRY s unless ready
                     next_ask[name] = now + INPUTS_RETRY
-                    if res is not None and res.success:
+                    text = (None if res is None else
+                            inputs_matched.opened(self.guard, name, res.success, res.message))
+                    if res is not None and text is None:
+                        waiting[name] = "its answers are not authentic (dropped)"
+                    elif res is not None and res.success:
                         del waiting[name]
                     elif res is not None:
-                        waiting[name] = f"readers of {res.message} not matched"
+                        waiting[name] = f"readers of {text} not matched"
             return not waiting
         if not self.loop.spin(until=ready, timeout=INPUTS_TIMEOUT) and not self.loop.stopped:
             self.log.error("starting although not every reader has matched this node's "

@@ -12,6 +12,13 @@ readers have matched, so it answers: ``success`` is true when each of its subscr
 a topic of :data:`SIM_TOPICS` has matched at least one writer; ``message`` lists the topics
 still waiting (empty when ready). A node with no such subscription (an inactive
 controller) is ready.
+
+The answer is authenticated like the graph's messages (core/msg_auth.py): with the run's key
+the message ends with ``|`` and the hex trailer of the answer (the success flag and the
+text), signed under the service's name (:func:`seal`). The sim drops an answer that does
+not verify (:func:`opened`; counted and reported by its input guard like any dropped
+message), so a process without the key that offers ``/<node>/inputs_matched`` cannot start
+the run before that node's readers have matched.
 """
 from __future__ import annotations
 
@@ -22,6 +29,8 @@ from rclpy.service import Service
 from rclpy.subscription import Subscription
 
 from ..core import topics as T
+from ..core.msg_auth import TRAILER_BYTES, Signer, Unsigned
+from .input_guard import InputGuard
 
 #: Name of the service under the node's namespace (``/<node>/inputs_matched``).
 SERVICE = "inputs_matched"
@@ -35,17 +44,53 @@ def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
                    if s.topic_name in SIM_TOPICS and s.get_publisher_count() < 1})
 
 
-def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]]) -> Service:
+def service_name(node_name: str) -> str:
+    """The service of node ``node_name`` (root namespace), also its authentication topic."""
+    return f"/{node_name}/{SERVICE}"
+
+
+def _payload(success: bool, text: str) -> bytes:
+    return f"{int(success)}|{text}".encode()
+
+
+def seal(signer: Signer | Unsigned, success: bool, text: str) -> str:
+    """An answer's message: ``text``, then (authentication on) ``|`` and the hex trailer
+    that authenticates ``success`` and ``text``."""
+    if isinstance(signer, Unsigned):
+        return text
+    return f"{text}|{signer.sign(_payload(success, text))[-TRAILER_BYTES:].hex()}"
+
+
+def opened(guard: InputGuard, name: str, success: bool, message: str) -> str | None:
+    """The text of node ``name``'s answer if it is authentic (authentication off: the
+    message); None if not (dropped: counted and logged by ``guard``)."""
+    if guard.key is None:
+        return message
+    text, sep, tag = message.rpartition("|")
+    try:
+        trailer = bytes.fromhex(tag) if sep else b""
+    except ValueError:
+        trailer = b""
+    payload = _payload(success, text)
+    data = payload + b"\0" * (-len(payload) % 8) + trailer
+    return text if guard.payload(service_name(name), data) is not None else None
+
+
+def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]],
+          guard: InputGuard) -> Service:
     """Create ``node``'s ``~/inputs_matched`` service; ``subscriptions()`` gives the node's
-    current subscriptions (its hot loop's). Call the loop's ``refresh()`` afterwards."""
+    current subscriptions (its hot loop's); answers are signed with ``guard``'s key. Call
+    the loop's ``refresh()`` afterwards."""
     from std_srvs.srv import Trigger
+
+    signer = guard.signer(service_name(node.get_name()))
 
     def answer(request: Any, response: Any) -> Any:
         waiting = unmatched(subscriptions())
         response.success = not waiting
-        response.message = ",".join(waiting)
+        response.message = seal(signer, response.success, ",".join(waiting))
         return response
-    return node.create_service(Trigger, f"~/{SERVICE}", answer)
+    return node.create_service(Trigger, service_name(node.get_name()), answer)
 
 
-__all__ = ["SERVICE", "SIM_TOPICS", "offer", "unmatched"]
+__all__ = ["SERVICE", "SIM_TOPICS", "offer", "opened", "seal", "service_name", "unmatched"]
