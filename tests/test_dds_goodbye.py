@@ -75,3 +75,4 @@ def _bindable(port: int) -> bool:
         except OSError:
             return False
     return True
+

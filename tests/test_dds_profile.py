@@ -205,3 +205,39 @@ def test_dead_ports_of_the_domain_and_dead_segments_are_removed_and_nothing_else
     for kept in (other_domain, young, live):
         assert {kept, f"{kept}_el", f"sem.{kept}_mutex"} <= left
     assert clean_exit in left
+
+
+def test_the_launcher_looks_at_a_running_nodes_locks_until_two_looks_agree(
+        tmp_path, monkeypatch):
+    """GraphProcesses.poll notes a live node's shared-memory locks (for the fence if a
+    signal kills it): every poll until two looks in a row agree, then every LOCKS_REFRESH
+    s (a look reads /proc/<pid>/fd, ~0.5 ms; the watch loop polls every 0.1 s)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import hexapod_metrics.cmd_graph as cg
+
+    looks = []
+    answers = [[], [Path("/dev/shm/fastrtps_a_el")], [Path("/dev/shm/fastrtps_a_el")]]
+
+    def fake_locks(pid):
+        looks.append(pid)
+        return answers[min(len(looks) - 1, len(answers) - 1)]
+    monkeypatch.setattr(cg, "shm_locks", fake_locks)
+    g = cg.GraphProcesses(tmp_path, env={"HEXAPOD_AUTH": "off"})
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    g.procs["n"] = proc
+    try:
+        for _ in range(10):
+            assert g.poll("n") is None
+        assert len(looks) == 3  # empty, first list, the same list again: then it waits
+        assert g._locks["n"] == answers[1]
+        later = time.monotonic() + cg.LOCKS_REFRESH + 0.1
+        monkeypatch.setattr(cg, "time", SimpleNamespace(monotonic=lambda: later))
+        g.poll("n")
+        assert len(looks) == 4
+    finally:
+        proc.kill()
+        proc.wait()

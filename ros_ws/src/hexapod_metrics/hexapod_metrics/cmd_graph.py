@@ -68,6 +68,9 @@ SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller",
 #: their Fast DDS threads only).
 RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller", "trajectory_generator")
 RT_PRIORITY_NODES = RT_NODES + ("metrics", "markers", "foxglove_bridge")
+#: Wall s between two looks at a running node's shared-memory locks once they are known
+#: (GraphProcesses.poll; the launcher's watch loop polls every 0.1 s).
+LOCKS_REFRESH = 2.0
 
 
 #: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
@@ -127,6 +130,7 @@ class GraphProcesses:
         self._started: set[str] = set()
         self._restart_ids = RESTART_PARTICIPANT_IDS
         self._locks: dict[str, list[Path]] = {}
+        self._locks_due: dict[str, float] = {}  # monotonic s: next look at a node's locks
         self._fence = PortFence()
         self._said_goodbye: set[str] = set()
 
@@ -180,7 +184,14 @@ class GraphProcesses:
         proc = self.procs[name]
         code = proc.poll()
         if code is None:
-            self._locks[name] = shm_locks(proc.pid) or self._locks.get(name, [])
+            now = time.monotonic()
+            if now >= self._locks_due.get(name, 0.0):
+                # a node's ports are made with its participant, at start: once two looks
+                # in a row agree, a look every LOCKS_REFRESH s is enough (one is ~0.5 ms)
+                locks = shm_locks(proc.pid)
+                if locks and locks == self._locks.get(name):
+                    self._locks_due[name] = now + LOCKS_REFRESH
+                self._locks[name] = locks or self._locks.get(name, [])
         else:
             self._ended(name, code)
         return code
@@ -193,6 +204,7 @@ class GraphProcesses:
                 send_goodbye(prefix, domain_id_from_env(self.env))
             self._fence.hold(self._locks.get(name, ()))  # keep new participants off its ids
         self._locks.pop(name, None)
+        self._locks_due.pop(name, None)
 
     def fenced(self) -> list[Path]:
         """The listener locks held for nodes of this graph that died by a signal."""
