@@ -137,12 +137,6 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
 CPU_WINDOW = 5.0
 
 
-def _cpu_seconds(pid: int) -> float:
-    """User + system CPU time (s) process ``pid`` has used so far (/proc/<pid>/stat)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
         kill_idle: float | None = None, kill: bool = True) -> dict:
     """One realtime run; the sim's figures and the lost ticks of each switch (with
@@ -193,8 +187,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
         if kill_idle is not None:
             while time.monotonic() < start + kill_idle:
                 ex.spin_once(timeout_sec=0.01)
-            sim_pid = g.procs["hexapod_sim"].pid
-            cpu0, at_kill = _cpu_seconds(sim_pid), time.monotonic()
+            cpu0, at_kill = g.cpu_seconds("hexapod_sim"), time.monotonic()
             if kill:
                 g.kill("pd_p_controller")  # pd_pf is in charge: pd_p is idle
             kill_tick = int(round(clock_ns[0] * 1e-9 / args.period))  # the sim's, at the kill
@@ -203,7 +196,7 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
                 ex.spin_once(timeout_sec=0.01)
                 if kill and gone is None and "pd_p_controller" not in node.get_node_names():
                     gone = time.monotonic() - at_kill
-            cpu = (_cpu_seconds(sim_pid) - cpu0) / (time.monotonic() - at_kill)
+            cpu = (g.cpu_seconds("hexapod_sim") - cpu0) / (time.monotonic() - at_kill)
         target = "pd_p"
         for i in range(switches):
             due = start + (i + 1) * args.every

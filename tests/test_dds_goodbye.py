@@ -10,10 +10,10 @@ import struct
 
 import pytest
 
-from hexapod_sim.runtime.dds_goodbye import (PARTICIPANT_IDS, PREFIX_LOG, GoodbyeError,
+from hexapod_sim.runtime.dds_goodbye import (PREFIX_LOG, GoodbyeError,
                                              goodbye_datagram, metatraffic_ports,
                                              prefix_from_log, send_goodbye)
-from hexapod_sim.runtime.dds_profile import unicast_ports
+from hexapod_sim.runtime.dds_profile import DOMAIN_PARTICIPANT_IDS, unicast_ports
 
 PREFIX = bytes.fromhex("010f78fd3a7fbecd07000000")
 
@@ -57,7 +57,7 @@ def test_the_launcher_reads_the_latest_prefix_a_node_logged():
 
 def test_the_goodbye_reaches_every_participant_port_of_the_domain():
     ports = metatraffic_ports(42)
-    assert ports == [unicast_ports(42, i)[0] for i in PARTICIPANT_IDS]
+    assert ports == [unicast_ports(42, i)[0] for i in DOMAIN_PARTICIPANT_IDS]
     free = [p for p in ports if _bindable(p)]
     if not free:
         pytest.skip("every discovery port of domain 42 is taken here")

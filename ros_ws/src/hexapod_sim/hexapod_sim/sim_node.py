@@ -309,13 +309,14 @@ class SimNode(Node):
                     res = future.result()
                     del asked[name]  # asked again after INPUTS_RETRY s unless ready
                     next_ask[name] = now + INPUTS_RETRY
-                    text = (None if res is None else
-                            inputs_matched.opened(self.guard, name, res.success, res.message))
-                    if res is not None and text is None:
+                    if res is None:
+                        continue
+                    text = inputs_matched.opened(self.guard, name, res.success, res.message)
+                    if text is None:
                         waiting[name] = "its answers are not authentic (dropped)"
-                    elif res is not None and res.success:
+                    elif res.success:
                         del waiting[name]
-                    elif res is not None:
+                    else:
                         waiting[name] = f"readers of {text} not matched"
             return not waiting
         if not self.loop.spin(until=ready, timeout=INPUTS_TIMEOUT) and not self.loop.stopped:

@@ -27,10 +27,7 @@ import struct
 from collections.abc import Iterable
 from typing import Any
 
-from .dds_profile import unicast_ports
-
-#: Participant ids whose ports fit in a domain's range of 250 ports.
-PARTICIPANT_IDS = range(0, 120)
+from .dds_profile import DOMAIN_PARTICIPANT_IDS, unicast_ports
 
 #: What every node logs once at start, with its participant's GUID prefix in hex.
 PREFIX_LOG = "DDS participant"
@@ -88,7 +85,8 @@ def goodbye_datagram(prefix: bytes) -> bytes:
     return _HEADER + prefix + submessage
 
 
-def metatraffic_ports(domain_id: int, ids: Iterable[int] = PARTICIPANT_IDS) -> list[int]:
+def metatraffic_ports(domain_id: int,
+                      ids: Iterable[int] = DOMAIN_PARTICIPANT_IDS) -> list[int]:
     """The metatraffic (discovery) unicast UDP ports of participants ``ids`` of
     ``domain_id`` (:func:`~.dds_profile.unicast_ports`)."""
     return [unicast_ports(domain_id, i)[0] for i in ids]
@@ -109,5 +107,5 @@ def send_goodbye(prefix: bytes, domain_id: int, host: str = "127.0.0.1") -> int:
     return sent
 
 
-__all__ = ["GoodbyeError", "PARTICIPANT_IDS", "PREFIX_LOG", "goodbye_datagram",
+__all__ = ["GoodbyeError", "PREFIX_LOG", "goodbye_datagram",
            "metatraffic_ports", "participant_prefix", "prefix_from_log", "send_goodbye"]

@@ -138,15 +138,17 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 """
 
 
+#: The participant ids of a domain: those whose unicast ports (:func:`unicast_ports`) fall
+#: in the domain's 250 ports (id 120's would be the next domain's discovery ports).
+DOMAIN_PARTICIPANT_IDS = range(0, 120)
 #: Participant ids given to restarted processes (:func:`private_profile`): above the ids
-#: Fast DDS hands out to a graph's own participants (0, 1, ... in start order), below 120
-#: (the unicast ports of id 125 would be the next domain's).
-RESTART_PARTICIPANT_IDS = range(60, 120)
+#: Fast DDS hands out to a graph's own participants (0, 1, ... in start order).
+RESTART_PARTICIPANT_IDS = range(60, DOMAIN_PARTICIPANT_IDS.stop)
 #: Participant ids of the project's command-line tools (``hexapod status``, ``hexapod
 #: switch``): between a graph's own ids and :data:`RESTART_PARTICIPANT_IDS`.
 TOOL_PARTICIPANT_IDS = range(20, 60)
 #: Participant ids of nodes started by hand (not by the graph launcher).
-HAND_PARTICIPANT_IDS = range(0, 120)
+HAND_PARTICIPANT_IDS = DOMAIN_PARTICIPANT_IDS
 #: Where Fast DDS keeps its shared-memory ports (``fastrtps_port<N>``).
 SHM_DIR = Path("/dev/shm")
 
@@ -262,7 +264,7 @@ def remove_dead_shm(domain_id: int, min_age: float = 60.0,
     until its senders give up on it (:data:`HEALTHY_CHECK_MS`). Files of other users
     are left alone. The names of the ports and segments removed."""
     folder = SHM_DIR if shm_dir is None else shm_dir
-    ports = {f"fastrtps_port{port}" for pid in range(125)
+    ports = {f"fastrtps_port{port}" for pid in DOMAIN_PARTICIPANT_IDS
              for port in unicast_ports(domain_id, pid)}
     fence = PortFence()
     removed = []
@@ -320,7 +322,7 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
+__all__ = ["DOMAIN_PARTICIPANT_IDS", "FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
            "HEALTHY_CHECK_MS", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
            "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
            "private_profile", "remove_dead_shm", "shm_locks", "unicast_ports",
