@@ -7,7 +7,8 @@ matched" naming the joint states while no one publishes them (a reference publis
 not count: the sim does not write references), then "matched" once a joint-state writer
 has matched on its side; a node without such a reader is ready at once. Answers carry the
 run key's tag: an impostor's answer (no key), a genuine answer with its flag flipped,
-moved to another node or replayed is dropped and counted. The graph-level case (the sim
+moved to another node or replayed, and garbage (empty, no tag, a tag that is not hex, a
+zero tag, 100 kB of text, odd characters) are dropped and counted. The graph-level case (the sim
 does not start early on an impostor's word) is test_an_impostor_cannot_start_the_run.
 """
 from __future__ import annotations
@@ -74,6 +75,8 @@ success, message = raw["metrics"]
 out["flipped"] = inputs_matched.opened(guard, "metrics", not success, message)
 out["moved"] = inputs_matched.opened(guard, "pd_pf_controller", success, message)
 out["replayed"] = inputs_matched.opened(guard, "metrics", success, message)
+out["garbage"] = [inputs_matched.opened(guard, "metrics", True, m) for m in (
+    "", "|", "x|zz", "|" + "00" * 32, "a" * 100000 + "|" + "ff" * 32, "\x00|\u00e9")]
 out["idle"] = ask("pd_p_controller")
 out["impostor"] = ask("markers")
 out["drops"] = guard.drops.values()
@@ -105,13 +108,14 @@ def test_a_reader_is_ready_once_its_sim_topics_have_matched_a_writer(tmp_path):
     drops = out.pop("drops")
     assert out == {"before": [False, "/hexapod/joint_states"],
                    "flipped": None, "moved": None, "replayed": None,
+                   "garbage": [None] * 6,
                    "idle": [True, ""],
                    "impostor": [True, None],
                    "reference_only": [False, "/hexapod/joint_states"],
                    "after": [True, ""]}
-    assert drops == {"dropped": "4",
+    assert drops == {"dropped": "10",
                      "dropped /markers/inputs_matched (unauthenticated)": "1",
-                     "dropped /metrics/inputs_matched (unauthenticated)": "1",  # flipped
+                     "dropped /metrics/inputs_matched (unauthenticated)": "7",  # flipped, garbage
                      "dropped /pd_pf_controller/inputs_matched (unauthenticated)": "1",
                      "dropped /metrics/inputs_matched (replayed)": "1"}
 
