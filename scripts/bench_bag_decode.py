@@ -89,7 +89,7 @@ def write_graph_bag(path: Path, seconds: float) -> int:
     from hexapod_control.core.closed_loop import run
     from hexapod_metrics.bag import open_bag
     from hexapod_metrics.core.recording import write_run_bag
-    from hexapod_sim.core.params import load_params
+    from hexapod_common.core.params import load_params
 
     p = load_params(**{'sim.dt': 1e-4, 'sim.control_period': 1e-3})  # 1 kHz, as the graph
     write_run_bag(run(p, 'pd_pf', seconds, switches=[(seconds / 2, 'pd_p')]), path)
@@ -116,7 +116,7 @@ def child(mode: str, bag: Path, subset: int) -> dict[str, float]:
             check = sum(float(b.position[:, 0].sum())
                         for _, b in iter_joint_state_blocks(opened, streams))
     elif mode == 'graph-mcap':
-        from hexapod_sim.core.cdr import decode_joint_state_batch
+        from hexapod_common.core.cdr import decode_joint_state_batch
         from mcap.reader import make_reader
 
         batches: dict[str, list[bytes]] = {t: [] for t in streams}

@@ -45,8 +45,8 @@ from numba import njit
 
 from hexapod_control.core.closed_loop import Case, run, run_batch
 from hexapod_sim.core import dynamics, engine
-from hexapod_sim.core import layout as L
-from hexapod_sim.core.params import N_LEGS, HexapodParams, load_params
+from hexapod_common.core import layout as L
+from hexapod_common.core.params import N_LEGS, HexapodParams, load_params
 
 #: S1 configurations (label, dt s, control period s, target x real time or None).
 S1_CASES = (("10 kHz physics, 1 kHz control", 1e-4, 1e-3, 150.0),

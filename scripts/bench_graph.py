@@ -21,8 +21,8 @@ Each run first measures how much of a core a busy loop gets for 1 s: the machine
 shared with load that ps does not show, and the figures move with it.
 
 With --breakdown every node records timestamps of its per-tick work
-(``hexapod_sim.core.trace``, HEXAPOD_TRACE_DIR) and each S4 run prints where a tick's wall
-time goes (``hexapod_sim.core.trace_breakdown``): DDS delivery (the samples' source and
+(``hexapod_common.core.trace``, HEXAPOD_TRACE_DIR) and each S4 run prints where a tick's wall
+time goes (``hexapod_common.core.trace_breakdown``): DDS delivery (the samples' source and
 reception timestamps), wake-ups, takes, verification, decoding, checks, the control law,
 encoding, signing, publishing, the physics step; the segments add up to the tick period.
 Tracing costs a few microseconds per event, so the breakdown runs are a little slower than
@@ -61,9 +61,9 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priorit
     ``rt_priority`` (0: normal scheduling); the sim's summary figures, each node's CPU
     seconds and whether every control-path node got SCHED_FIFO; with ``trace_dir`` every
     node writes its trace there."""
-    from hexapod_metrics.cmd_graph import RT_PRIORITY_NODES, GraphProcesses
-    from hexapod_sim.core.msg_auth import AUTH_ENV
-    from hexapod_sim.core.trace import TRACE_ENV
+    from hexapod_bringup.cmd_graph import RT_PRIORITY_NODES, GraphProcesses
+    from hexapod_common.core.msg_auth import AUTH_ENV
+    from hexapod_common.core.trace import TRACE_ENV
 
     env = {"ROS_DOMAIN_ID": str(domain), AUTH_ENV: auth}
     if trace_dir is not None:
@@ -103,9 +103,9 @@ def run_graph(mode: str, duration: float, domain: int, log_dir: Path, rt_priorit
 
 
 def print_breakdown(trace_dir: Path, rate: float) -> None:
-    """Print the traced run's tick breakdown (hexapod_sim.core.trace_breakdown)."""
-    from hexapod_sim.core.params import load_params
-    from hexapod_sim.core.trace_breakdown import breakdown, format_breakdown, load
+    """Print the traced run's tick breakdown (hexapod_common.core.trace_breakdown)."""
+    from hexapod_common.core.params import load_params
+    from hexapod_common.core.trace_breakdown import breakdown, format_breakdown, load
 
     b = breakdown(load(trace_dir), load_params().run.controller)
     print(f"breakdown of a lockstep tick at {rate / 1000:g} kHz over {b.ticks} ticks (ms; "

@@ -33,7 +33,7 @@ def _children_cpu() -> float:
 
 def run_once(backend: list[str], out: Path, quick: bool, nice: int) -> dict[str, float]:
     """One `hexapod reproduce`; wall s, CPU s (command and workers), load before/after."""
-    cmd = ["nice", "-n", str(nice), sys.executable, "-m", "hexapod_metrics.cli", "reproduce",
+    cmd = ["nice", "-n", str(nice), sys.executable, "-m", "hexapod_bringup.cli", "reproduce",
            *(["--quick"] if quick else []), *backend, "--no-progress", "--out", str(out)]
     load0, cpu0, t0 = os.getloadavg()[0], _children_cpu(), time.perf_counter()
     r = subprocess.run(cmd, check=False, capture_output=True, text=True)

@@ -39,7 +39,7 @@ import numpy as np
 from hexapod_control.core.closed_loop import Case, run_batch
 from hexapod_sim import mujoco_model as mm
 from hexapod_sim.core import engine
-from hexapod_sim.core import layout as L
+from hexapod_common.core import layout as L
 from hexapod_sim.core.batch_physics import (
     LANES,
     block_integrate,
@@ -47,7 +47,7 @@ from hexapod_sim.core.batch_physics import (
     block_scratch,
     block_solve,
 )
-from hexapod_sim.core.params import N_LEGS, load_params
+from hexapod_common.core.params import N_LEGS, load_params
 from mujoco import rollout as mj_rollout
 from numba import njit, prange
 

@@ -80,9 +80,9 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int]) -> tuple[list[int], int
     one before to 3 after that no command of the controller named in the state answered.
     A tick whose state is not in the bag counts as lost (the states' count says why)."""
     from hexapod_metrics.bag import open_bag
-    from hexapod_sim.runtime import conversions as C
-    from hexapod_sim.core import topics as T
-    from hexapod_sim.core.labels import in_charge
+    from hexapod_common.runtime import conversions as C
+    from hexapod_common.core import topics as T
+    from hexapod_common.core.labels import in_charge
 
     frames: dict[str, dict[int, str]] = {T.JOINT_STATES: {}, T.JOINT_COMMANDS: {}}
     with open_bag(bag) as b:
@@ -104,9 +104,9 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
     sim's status messages in ``bag``."""
     import numpy as np
 
-    from hexapod_sim.core import cdr
+    from hexapod_common.core import cdr
     from hexapod_metrics.bag import open_bag
-    from hexapod_sim.core import topics as T
+    from hexapod_common.core import topics as T
 
     rows = []
     with open_bag(bag) as b:
@@ -148,8 +148,8 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 
-    from hexapod_metrics.cmd_graph import GraphProcesses
-    from hexapod_sim.core.switch_channel import ChannelError, request
+    from hexapod_bringup.cmd_graph import GraphProcesses
+    from hexapod_common.core.switch_channel import ChannelError, request
 
     duration = args.every * (switches + 1) if switches else args.duration
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},

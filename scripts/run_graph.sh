@@ -37,11 +37,11 @@
 # scripts/switch_controller.sh pd_p|pd_pf (same ROS_DOMAIN_ID). The graph's messages are
 # authenticated with a fresh key per run (a 0600 file in a private directory, removed at
 # the end; HEXAPOD_KEY_FILE names it for a node started by hand to join the run). The
-# launcher itself is hexapod_metrics/graph_launcher.py; this script only sets up and hands
+# launcher itself is hexapod_bringup/graph_launcher.py; this script only sets up and hands
 # over to it.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh" --quiet
 # shellcheck source=scripts/env.sh
 source "$root/scripts/env.sh"
-exec python -m hexapod_metrics.graph_launcher "$@"
+exec python -m hexapod_bringup.graph_launcher "$@"

@@ -34,7 +34,7 @@ class Client:
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
 
-        from hexapod_sim.runtime import conversions as C
+        from hexapod_common.runtime import conversions as C
 
         self.ctx = Context()
         rclpy.init(context=self.ctx, domain_id=domain)
@@ -78,9 +78,9 @@ class Client:
 
 def main() -> int:
     reexec_in_env(__file__)
-    from hexapod_metrics.cmd_graph import GraphProcesses
+    from hexapod_bringup.cmd_graph import GraphProcesses
     from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-    from hexapod_sim.core import topics as T
+    from hexapod_common.core import topics as T
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=600.0, help="simulated seconds")

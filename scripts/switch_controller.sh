@@ -14,4 +14,4 @@ fi
 source "$here/env.sh"
 # The switch subcommand alone (not the whole `hexapod` CLI): it asks the sim over its local
 # socket first, so a switch takes a fraction of a second and no ROS context.
-exec python -m hexapod_metrics.cmd_graph switch "$@"
+exec python -m hexapod_bringup.cmd_graph switch "$@"

@@ -21,7 +21,8 @@ done
 if (( ${#dirs[@]} )); then
   (cd "$root" && ruff check ros_ws/src scripts tests)
   (cd "$root" && mypy --python-executable "$(command -v python)" \
-    ros_ws/src/hexapod_sim/hexapod_sim/core ros_ws/src/hexapod_control/hexapod_control/core \
-    ros_ws/src/hexapod_metrics/hexapod_metrics/core ros_ws/src/hexapod_metrics/hexapod_metrics/bag)
+    ros_ws/src/hexapod_common/hexapod_common/core ros_ws/src/hexapod_sim/hexapod_sim/core \
+    ros_ws/src/hexapod_control/hexapod_control/core ros_ws/src/hexapod_metrics/hexapod_metrics/core \
+    ros_ws/src/hexapod_metrics/hexapod_metrics/bag ros_ws/src/hexapod_bringup/hexapod_bringup/core)
 fi
 exec python -m pytest --rootdir "$root" -q "${dirs[@]}" "$@"

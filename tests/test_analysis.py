@@ -13,8 +13,8 @@ from hexapod_metrics.bag import BagWriter
 from hexapod_metrics.bag import BagReadError
 from hexapod_metrics.core.indices import INDEX_NAMES
 from hexapod_metrics.core.recording import write_run_bag
-from hexapod_metrics.core.simulate import simulate
-from hexapod_sim.core.params import load_params
+from hexapod_bringup.core.simulate import simulate
+from hexapod_common.core.params import load_params
 
 #: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
@@ -129,7 +129,7 @@ def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path):
     (tmp_path / "notabag" / "x.txt").write_text("hello")
     for target, message in [(other, "not a hexapod bag"), (tmp_path / "notabag", ""),
                             (tmp_path / "missing", "")]:
-        r = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "analyze", str(target),
+        r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(target),
                             "--no-plots"], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
@@ -138,7 +138,7 @@ def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path):
 
 def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path):
     bag, _ = switched_bag
-    r = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "analyze", str(bag),
+    r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(bag),
                         str(bag), "--csv", str(tmp_path / "a.csv"), "--plots",
                         str(tmp_path / "plots")], capture_output=True, text=True,
                        timeout=300, check=True)
@@ -151,14 +151,14 @@ def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path):
 def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path):
     from PIL import Image
 
-    from hexapod_metrics.animation import load_frames
+    from hexapod_bringup.animation import load_frames
 
     bag, r = switched_bag
     segments, l1, truncated = load_frames(bag, fps=5.0)
     assert [s.controller for s in segments] == ["pd_pf", "pd_p"] and not truncated
     np.testing.assert_array_equal(segments[1].obs[0], r.obs[2000])
     out = tmp_path / "walk.gif"
-    subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "animate", str(bag), "--out",
+    subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "animate", str(bag), "--out",
                     str(out), "--fps", "5"], check=True, capture_output=True, timeout=300)
     with Image.open(out) as im:
         assert im.n_frames == 11 and im.size[0] > 2 * im.size[1]

@@ -25,7 +25,7 @@ from hexapod_metrics.bag import (
     read_joint_state_topics,
 )
 from hexapod_metrics.bag.msgdefs import MESSAGE_TYPES, TYPE_JOINT_STATE
-from hexapod_sim.core import cdr
+from hexapod_common.core import cdr
 
 from killed_writer import write_then_kill
 
@@ -470,7 +470,7 @@ def test_streaming_blocks_cover_the_bag(bag_dir: tuple[Path, tuple[np.ndarray, .
 
 @pytest.mark.parametrize('module', [
     'hexapod_metrics.bag', 'hexapod_metrics.bag.reader', 'hexapod_metrics.bag.writer',
-    'hexapod_sim.core.cdr', 'hexapod_metrics.bag.msgdefs'])
+    'hexapod_common.core.cdr', 'hexapod_metrics.bag.msgdefs'])
 def test_bag_modules_import_without_rclpy(module: str) -> None:
     code = f'import sys, {module}; print("rclpy" in sys.modules)'
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True)

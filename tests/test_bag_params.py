@@ -13,10 +13,10 @@ from hexapod_metrics.bag import open_bag
 from hexapod_metrics.bag import BagReadError
 from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
 from hexapod_metrics.core.recording import PARAMS_KEY, write_run_bag
-from hexapod_metrics.core.simulate import simulate
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.param_log import ParamRecord, ParamRecordError, timeline
-from hexapod_sim.core.params import SPECS, load_params
+from hexapod_bringup.core.simulate import simulate
+from hexapod_common.core import topics as T
+from hexapod_common.core.param_log import ParamRecord, ParamRecordError, timeline
+from hexapod_common.core.params import SPECS, load_params
 
 #: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
@@ -86,7 +86,7 @@ def test_a_killed_writer_leaves_the_parameter_records_readable(slow_bag, tmp_pat
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "analyze", *args,
+    return subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", *args,
                            "--no-plots"], capture_output=True, text=True, timeout=300)
 
 
@@ -180,7 +180,7 @@ def test_a_bag_without_records_says_it_uses_the_defaults(tmp_path):
 
 
 def test_the_engine_changes_only_what_a_run_can_change():
-    from hexapod_sim.core.errors import ParameterError
+    from hexapod_common.core.errors import ParameterError
 
     p = load_params(**FAST)
     with pytest.raises(ParameterError, match="gait.velocity.*only of ground"):
@@ -191,7 +191,7 @@ def test_the_engine_changes_only_what_a_run_can_change():
 
 def test_simulate_change_writes_the_change_into_its_bag(tmp_path):
     bag = tmp_path / "bag"
-    out = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "simulate",
+    out = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "simulate",
                           "--controller", "pd_pf", "--change", "1.5:ground.scale=2.0",
                           "--set", "sim.dt=0.0001", "--set", "sim.control_period=0.001",
                           "--bag", str(bag), "--json"], capture_output=True, text=True,
@@ -199,7 +199,7 @@ def test_simulate_change_writes_the_change_into_its_bag(tmp_path):
     assert out.returncode == 0, out.stderr
     a = analyze_bag(bag)
     assert a.param_changes == [(1.5, "hexapod simulate", "ground.scale", 2.0)]
-    bad = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "simulate",
+    bad = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "simulate",
                           "--change", "ground.scale"], capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode == 2 and "TIME:NAME=VALUE" in bad.stderr

@@ -18,7 +18,7 @@ from hexapod_metrics.bag import (
     read_joint_state_arrays,
 )
 from hexapod_metrics.core.log_times import ControllerLogTimes, marker_array_stamp
-from hexapod_sim.core import cdr
+from hexapod_common.core import cdr
 
 from killed_writer import write_then_kill
 
@@ -94,7 +94,7 @@ def test_a_dead_tick_topic_stops_holding_the_chunks(tmp_path: Path) -> None:
 _KILLED = textwrap.dedent("""
     import sys
     import numpy as np
-    from hexapod_sim.core import cdr
+    from hexapod_common.core import cdr
     from hexapod_metrics.bag import BagWriter
     names = [f'j{i}' for i in range(12)]
     w = BagWriter(sys.argv[1], sync_topics=('/a', '/b'), chunk_size=16 * 1024).open()

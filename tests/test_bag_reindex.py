@@ -14,7 +14,7 @@ from hexapod_control.core.closed_loop import run
 from hexapod_metrics.bag import REINDEXED, BagWriteError, open_bag, reindex
 from hexapod_metrics.core.analysis import analyze_bag
 from hexapod_metrics.core.recording import write_run_bag
-from hexapod_sim.core.params import load_params
+from hexapod_common.core.params import load_params
 
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 
@@ -85,7 +85,7 @@ def test_reindexed_copy_analyses_as_the_torn_bag(torn: Path, tmp_path: Path) -> 
 
 def test_reindex_refuses_an_existing_directory_and_the_cli_says_so_in_one_line(
         torn: Path, tmp_path: Path) -> None:
-    from hexapod_metrics.cli import main
+    from hexapod_bringup.cli import main
 
     (tmp_path / "taken").mkdir()
     junk = tmp_path / "junk"

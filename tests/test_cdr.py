@@ -1,13 +1,13 @@
-"""The one CDR codec (hexapod_sim/core/cdr.py): rclpy's bytes, the vectorised decoder against
+"""The one CDR codec (hexapod_common/core/cdr.py): rclpy's bytes, the vectorised decoder against
 the per-message one, DDS padding, and the nodes' per-topic codec."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hexapod_sim.core import cdr
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.errors import CdrError
+from hexapod_common.core import cdr
+from hexapod_common.core import topics as T
+from hexapod_common.core.errors import CdrError
 
 LEGS = [f'leg{i}_{j}' for i in range(1, 7) for j in ('hip', 'knee')]
 TYPE_JOINT_STATE = 'sensor_msgs/msg/JointState'

@@ -3,8 +3,8 @@ import math
 
 import pytest
 
-from hexapod_metrics.core import claims
-from hexapod_metrics.core.claims import Measured, all3, any3, at_least, less
+from hexapod_bringup.core import claims
+from hexapod_bringup.core.claims import Measured, all3, any3, at_least, less
 
 NAMES = ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF", "L")
 

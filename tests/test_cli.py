@@ -7,7 +7,7 @@ import pytest
 
 
 def hexapod(*args, check=False):
-    return subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", *args],
+    return subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", *args],
                           capture_output=True, text=True, check=check, timeout=600)
 
 
@@ -19,8 +19,8 @@ def test_simulate_prints_the_seven_indices():
 
 
 def test_simulate_json_matches_the_python_api():
-    from hexapod_metrics.core.simulate import simulate
-    from hexapod_sim.core.params import load_params
+    from hexapod_bringup.core.simulate import simulate
+    from hexapod_common.core.params import load_params
 
     doc = json.loads(hexapod("simulate", "--controller", "both", "--t-max", "150",
                              "--json", check=True).stdout)

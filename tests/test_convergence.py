@@ -5,12 +5,12 @@ import math
 import pytest
 
 from hexapod_control.core.closed_loop import Case
-from hexapod_metrics.core.convergence import (ABS_TOL_TRACKING, Convergence, check_cases,
-                                              refined, tolerance)
-from hexapod_metrics.core.experiments import rate_experiment
+from hexapod_bringup.core.convergence import (ABS_TOL_TRACKING, Convergence, check_cases, refined,
+                                              tolerance)
+from hexapod_bringup.core.experiments import rate_experiment
 from hexapod_metrics.core.indices import INDEX_NAMES, Indices
-from hexapod_metrics.core.simulate import Outcome
-from hexapod_sim.core.params import load_params
+from hexapod_bringup.core.simulate import Outcome
+from hexapod_common.core.params import load_params
 
 GROUNDS = (1.0, 3.0, 10.0)
 T_MAX = (400.0, 170.0)

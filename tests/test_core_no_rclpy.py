@@ -7,8 +7,8 @@ import pytest
 
 @pytest.mark.parametrize("module", [
     "hexapod_sim.core.engine", "hexapod_control.core.closed_loop",
-    "hexapod_metrics.core.simulate", "hexapod_metrics.core.indices",
-    "hexapod_sim.core.tick_machine", "hexapod_sim.core.labels", "hexapod_sim.core.topics",
+    "hexapod_bringup.core.simulate", "hexapod_metrics.core.indices",
+    "hexapod_sim.core.tick_machine", "hexapod_common.core.labels", "hexapod_common.core.topics",
     "hexapod_metrics.core.cycles", "hexapod_metrics.core.analysis",
     "hexapod_metrics.core.recording"])
 def test_core_imports_no_rclpy(module):

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 from graph.bag_checks import bag_qos  # tests/graph: the same check of graph bags
 from hexapod_control.core.closed_loop import run
-from hexapod_sim.core import cdr
+from hexapod_common.core import cdr
 from hexapod_metrics.core.analysis import analyze_bag
 from hexapod_metrics.core.cycles import CYCLE_TOPICS, CycleScorer, TickLabels
 from hexapod_metrics.core.indices import indices_from_obs
 from hexapod_metrics.core.recording import write_run_bag
-from hexapod_sim.core import labels as L
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import load_params
+from hexapod_common.core import labels as L
+from hexapod_common.core import topics as T
+from hexapod_common.core.params import load_params
 
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 

@@ -10,10 +10,9 @@ import struct
 
 import pytest
 
-from hexapod_sim.runtime.dds_goodbye import (PREFIX_LOG, GoodbyeError,
-                                             goodbye_datagram, metatraffic_ports,
-                                             prefix_from_log, send_goodbye)
-from hexapod_sim.runtime.dds_profile import DOMAIN_PARTICIPANT_IDS, unicast_ports
+from hexapod_common.runtime.dds_goodbye import (PREFIX_LOG, GoodbyeError, goodbye_datagram,
+                                                metatraffic_ports, prefix_from_log, send_goodbye)
+from hexapod_common.runtime.dds_profile import DOMAIN_PARTICIPANT_IDS, unicast_ports
 
 PREFIX = bytes.fromhex("010f78fd3a7fbecd07000000")
 

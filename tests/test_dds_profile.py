@@ -1,4 +1,4 @@
-"""The graph's Fast DDS profile (hexapod_sim/runtime/dds_profile.py): private, well-formed,
+"""The graph's Fast DDS profile (hexapod_common/runtime/dds_profile.py): private, well-formed,
 and with a participant id of its own for restarted processes and tools (never a SIGKILLed
 process's, and after a SIGKILL not for other processes either: the fence)."""
 from __future__ import annotations
@@ -10,12 +10,12 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from hexapod_sim.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
-                                             RESTART_PARTICIPANT_IDS, SHM_DIR,
-                                             TOOL_PARTICIPANT_IDS, PortFence,
-                                             domain_id_from_env, remove_dead_shm, shm_locks,
-                                             private_profile, unicast_ports,
-                                             unused_participant_id)
+from hexapod_common.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
+                                                RESTART_PARTICIPANT_IDS, SHM_DIR,
+                                                TOOL_PARTICIPANT_IDS, PortFence,
+                                                domain_id_from_env, remove_dead_shm, shm_locks,
+                                                private_profile, unicast_ports,
+                                                unused_participant_id)
 
 NS = {"d": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
 
@@ -67,7 +67,7 @@ def test_the_shared_memory_transport_is_sized_and_checked_as_documented(tmp_path
 
 
 def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):
-    from hexapod_sim.core.topics import CONTROL_DEPTH, HISTORY_DEPTH, RECORD_DEPTH
+    from hexapod_common.core.topics import CONTROL_DEPTH, HISTORY_DEPTH, RECORD_DEPTH
 
     limits = ET.parse(private_profile(tmp_path)).getroot().find(
         "d:profiles/d:data_reader/d:topic/d:resourceLimitsQos", NS)
@@ -98,8 +98,8 @@ def test_a_new_process_never_takes_a_participant_id_whose_ports_exist(tmp_path):
 
 def test_a_hand_started_process_writes_its_profile_with_an_unused_participant_id(
         tmp_path, monkeypatch):
-    import hexapod_sim.runtime.dds_profile as dds
-    from hexapod_sim.runtime.hot_loop import configure_middleware
+    import hexapod_common.runtime.dds_profile as dds
+    from hexapod_common.runtime.hot_loop import configure_middleware
 
     monkeypatch.setattr(dds, "SHM_DIR", tmp_path)
     monkeypatch.setenv("ROS_DOMAIN_ID", "9")
@@ -217,7 +217,7 @@ def test_the_launcher_looks_at_a_running_nodes_locks_until_two_looks_agree(
     from pathlib import Path
     from types import SimpleNamespace
 
-    import hexapod_metrics.cmd_graph as cg
+    import hexapod_bringup.cmd_graph as cg
 
     looks = []
     answers = [[], [Path("/dev/shm/fastrtps_a_el")], [Path("/dev/shm/fastrtps_a_el")]]

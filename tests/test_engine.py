@@ -7,10 +7,10 @@ import pytest
 from hexapod_control.core.closed_loop import Case, run
 from hexapod_control.core.controllers import control_law, controller_code, gain_vector
 from hexapod_metrics.core.indices import INDEX_NAMES
-from hexapod_metrics.core.simulate import evaluate_batch, simulate
+from hexapod_bringup.core.simulate import evaluate_batch, simulate
 from hexapod_sim.core.actuator import saturate
 from hexapod_sim.core.engine import Physics
-from hexapod_sim.core.params import load_params
+from hexapod_common.core.params import load_params
 
 
 def test_integrator_pd_p_at_1khz_within_one_percent_of_half_dt():

@@ -5,13 +5,12 @@ import numpy as np
 import pytest
 
 from hexapod_control.core.closed_loop import Case
-from hexapod_metrics.core.experiments import (ground_sweep, hip_score, select_best, tune,
-                                              walking)
+from hexapod_bringup.core.experiments import ground_sweep, hip_score, select_best, tune, walking
 from hexapod_metrics.core.indices import Indices
-from hexapod_metrics.core.parallel import InlineBackend, ProcessBackend, make_backend
-from hexapod_metrics.core.simulate import Outcome, simulate
-from hexapod_sim.core.layout import O_TQ
-from hexapod_sim.core.params import load_params
+from hexapod_bringup.core.parallel import InlineBackend, ProcessBackend, make_backend
+from hexapod_bringup.core.simulate import Outcome, simulate
+from hexapod_common.core.layout import O_TQ
+from hexapod_common.core.params import load_params
 
 PERCENTS = (20.0, 100.0, 500.0)
 

@@ -5,7 +5,7 @@ from pathlib import Path
 from hexapod_metrics.core.recording import TOPICS, write_run_bag
 from hexapod_metrics.foxglove_layout import (HIP_ERROR, INDICES, LAYOUT_FILE, layout_json,
                                              layout_topics)
-from hexapod_sim.core import topics as T
+from hexapod_common.core import topics as T
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -31,7 +31,7 @@ def test_an_in_process_bag_has_every_topic_the_plots_read(tmp_path):
     """A `hexapod simulate` bag: everything but the graph-only markers and sim status."""
     from hexapod_control.core.closed_loop import run
     from hexapod_metrics.bag import open_bag
-    from hexapod_sim.core.params import load_params
+    from hexapod_common.core.params import load_params
 
     doc = json.loads((ROOT / LAYOUT_FILE).read_text(encoding="utf-8"))
     read, _ = layout_topics(doc)

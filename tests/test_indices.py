@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from hexapod_metrics.core.indices import compute_indices, evaluation_window
-from hexapod_sim.core.errors import ParameterError
-from hexapod_sim.core.params import load_params
+from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.params import load_params
 
 
 def _window(n=1000, dt=1e-3):

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from hexapod_sim.core.errors import UnreachableTargetError
-from hexapod_sim.core.gait import reference
-from hexapod_sim.core.kinematics import (foot_force_torque, foot_offset, inverse_kinematics,
-                                         joint_rates, psi, psi_jacobian)
-from hexapod_sim.core.params import load_params
+from hexapod_common.core.errors import UnreachableTargetError
+from hexapod_common.core.gait import reference
+from hexapod_common.core.kinematics import (foot_force_torque, foot_offset, inverse_kinematics,
+                                            joint_rates, psi, psi_jacobian)
+from hexapod_common.core.params import load_params
 
 
 def test_ik_fk_round_trip_over_whole_gait():

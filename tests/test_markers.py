@@ -15,7 +15,7 @@ def test_markers_of_a_run_round_trip_through_a_bag(tmp_path):
     from hexapod_metrics.bag import BagWriter
     from hexapod_metrics.core.figure import stick_figure
     from hexapod_metrics.marker_node import markers
-    from hexapod_sim.core.params import load_params
+    from hexapod_common.core.params import load_params
 
     FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}  # 1 kHz: a small run
 

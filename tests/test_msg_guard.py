@@ -7,9 +7,9 @@ import stat
 import numpy as np
 import pytest
 
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core.msg_auth import (AuthError, Rejected, Signer, TRAILER_BYTES, Verifier,
-                                       new_key_file, read_key_file, run_key)
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core.msg_auth import (AuthError, Rejected, Signer, TRAILER_BYTES, Verifier,
+                                          new_key_file, read_key_file, run_key)
 
 
 @pytest.fixture
@@ -46,7 +46,7 @@ def test_a_replayed_message_is_rejected_and_senders_are_kept_apart(key):
     in a reader's queue (seen in the rogue graph test: the recorder then lost the genuine
     commands queued behind it) costs nothing; any second copy, and anything older than the
     replay window, is refused."""
-    from hexapod_sim.core.msg_auth import REPLAY_WINDOW
+    from hexapod_common.core.msg_auth import REPLAY_WINDOW
 
     a, b = Signer(key, "/t"), Signer(key, "/t")
     v = Verifier(key, "/t")
@@ -141,9 +141,9 @@ def test_finite_check():
 
 def test_guard_decoding_of_malformed_joint_states():
     pytest.importorskip("rclpy", reason="the guard lives on the node side (scripts/setup.sh)")
-    from hexapod_sim.runtime import conversions as C
-    from hexapod_sim.core import topics as T
-    from hexapod_sim.runtime.input_guard import _decode
+    from hexapod_common.runtime import conversions as C
+    from hexapod_common.core import topics as T
+    from hexapod_common.runtime.input_guard import _decode
 
     codec = C.CODECS[T.JOINT_COMMANDS]
     good = codec.encode(5_000_000, "pd_pf", np.zeros(12), np.zeros(12), np.ones(12))
@@ -170,8 +170,8 @@ def test_guard_decoding_of_malformed_joint_states():
 def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
     import threading
 
-    from hexapod_sim.core.switch_channel import (ChannelError, SwitchServer, request,
-                                                 runtime_dir)
+    from hexapod_common.core.switch_channel import (ChannelError, SwitchServer, request,
+                                                    runtime_dir)
 
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
     assert request("switch pd_p", 99, 1.0) is None  # no sim listens: the ROS path is used

@@ -19,8 +19,8 @@ mujoco = pytest.importorskip(
 
 from hexapod_sim import mujoco_model as mm  # noqa: E402
 from hexapod_sim.core import dynamics, engine  # noqa: E402
-from hexapod_sim.core import layout as L  # noqa: E402
-from hexapod_sim.core.params import SPECS, N_LEGS, HexapodParams, load_params  # noqa: E402
+from hexapod_common.core import layout as L  # noqa: E402
+from hexapod_common.core.params import SPECS, N_LEGS, HexapodParams, load_params  # noqa: E402
 
 N_STATES = 50
 TOL = 1e-9

@@ -3,8 +3,8 @@ import math
 
 import pytest
 
-from hexapod_sim.core.errors import ParameterError, ParamsFileError
-from hexapod_sim.core.params import SPECS, load_params
+from hexapod_common.core.errors import ParameterError, ParamsFileError
+from hexapod_common.core.params import SPECS, load_params
 
 
 def test_defaults_are_the_paper_base_experiment():

@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from hexapod_metrics.core import claims
+from hexapod_bringup.core import claims
 from hexapod_metrics.core.indices import REPORTED_NAMES, Indices
 
 
@@ -21,7 +21,7 @@ def _measured(doc):
 
 def test_reproduce_quick_writes_report_with_all_claims(tmp_path):
     out = tmp_path / "report"
-    r = subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", "reproduce", "--quick",
+    r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "reproduce", "--quick",
                         "--backend", "inline", "--no-progress", "--out", str(out)],
                        capture_output=True, text=True, timeout=900, check=True)
     text = (out / "README.md").read_text()

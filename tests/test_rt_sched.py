@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 import threading
 
-from hexapod_sim.runtime.rt_sched import control_path_threads, dds_thread
+from hexapod_common.runtime.rt_sched import control_path_threads, dds_thread
 
 
 def test_main_comes_first_and_only_fast_dds_receive_and_event_threads_follow():

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from hexapod_sim.core.params import default_params_path
+from hexapod_common.core.params import default_params_path
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = default_params_path().read_text()
@@ -23,7 +23,7 @@ BASE = default_params_path().read_text()
 def hexapod(*args: str) -> subprocess.CompletedProcess:
     """The `hexapod` CLI's entry point (what scripts/hexapod runs), in this process: the
     same code as a subprocess, without a second interpreter start per case."""
-    from hexapod_metrics.cli import main
+    from hexapod_bringup.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):

@@ -1,4 +1,4 @@
-"""The round-trip breakdown (hexapod_sim.core.trace_breakdown) on traces with known timing:
+"""The round-trip breakdown (hexapod_common.core.trace_breakdown) on traces with known timing:
 every segment comes out at its planted length and the segments add up to the period."""
 import os
 import subprocess
@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 import pytest
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import trace as tr
-from hexapod_sim.core.trace_breakdown import ROUND_TRIP, SEGMENTS, breakdown, load
+from hexapod_common.core import topics as T
+from hexapod_common.core import trace as tr
+from hexapod_common.core.trace_breakdown import ROUND_TRIP, SEGMENTS, breakdown, load
 
 TICK_NS = 1_000_000      # stamps: 1 kHz
 PERIOD = 10_000          # wall ns per tick in the planted traces
@@ -85,7 +85,7 @@ def test_breakdown_refuses_a_trace_without_the_controller_in_charge():
 
 
 def test_a_traced_process_writes_its_rows_at_exit_and_none_without_the_variable(tmp_path):
-    code = ("from hexapod_sim.core import trace as t; t.name_process('probe'); "
+    code = ("from hexapod_common.core import trace as t; t.name_process('probe'); "
             "t.TRACER.mark(t.LAW0, '/hexapod/joint_commands', 7); t.TRACER.wake()")
     subprocess.run([sys.executable, "-c", code], check=True,
                    env={**os.environ, tr.TRACE_ENV: str(tmp_path)})
@@ -94,7 +94,7 @@ def test_a_traced_process_writes_its_rows_at_exit_and_none_without_the_variable(
     assert list(rows[0, :3]) == [tr.LAW0, ID[T.JOINT_COMMANDS], 7]
     assert rows[1, 0] == tr.WAKE and rows[1, 5] >= rows[1, 4] > 0
     off = subprocess.run([sys.executable, "-c",
-                          "from hexapod_sim.core import trace as t; print(t.TRACER)"],
+                          "from hexapod_common.core import trace as t; print(t.TRACER)"],
                          check=True, capture_output=True, text=True,
                          env={k: v for k, v in os.environ.items()
                               if k != tr.TRACE_ENV})

@@ -7,7 +7,7 @@ from typing import Any
 import yaml
 
 from hexapod_metrics.core.recording import TICK_TOPICS
-from hexapod_sim.core.params import NODE_PARAMS
+from hexapod_common.core.params import NODE_PARAMS
 
 MS = 1_000_000
 

@@ -17,7 +17,7 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
-from hexapod_metrics.cmd_graph import GraphProcesses
+from hexapod_bringup.cmd_graph import GraphProcesses
 
 rclpy = pytest.importorskip("rclpy", reason="the graph tests need rclpy (scripts/setup.sh)")
 
@@ -33,7 +33,7 @@ STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_c
 
 def fast_params(**overrides: Any) -> Any:
     """The params file's parameters at :data:`FAST_TIMING` (what make_graph's nodes run)."""
-    from hexapod_sim.core.params import load_params
+    from hexapod_common.core.params import load_params
 
     return load_params(**{"sim.dt": 1e-4, "sim.control_period": 1e-3, **overrides})
 
@@ -100,7 +100,7 @@ def hexapod_cli(domain_id: int, *args: str, timeout: float = 120) -> subprocess.
     """Run the ``hexapod`` CLI on a domain id."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    return subprocess.run([sys.executable, "-m", "hexapod_metrics.cli", *args], env=env,
+    return subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", *args], env=env,
                           capture_output=True, text=True, timeout=timeout)
 
 

@@ -40,11 +40,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from visualization_msgs.msg import MarkerArray
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.msg_auth import TRAILER_BYTES, Signer, run_key
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import topics as T
+from hexapod_common.core.labels import in_charge
+from hexapod_common.core.msg_auth import TRAILER_BYTES, Signer, run_key
+from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
 
 TYPES = {T.JOINT_STATES: JointState, T.FOOT_FORCES: JointState, T.HIP_STATES: JointState,
          T.REFERENCE: JointState, T.JOINT_COMMANDS: JointState, T.ACTIVE_CONTROLLER: String,

@@ -1,4 +1,4 @@
-"""Messages <-> arrays (hexapod_sim.runtime.conversions) and the ROS side of parameters."""
+"""Messages <-> arrays (hexapod_common.runtime.conversions) and the ROS side of parameters."""
 from __future__ import annotations
 
 import math
@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import SPECS
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import topics as T
+from hexapod_common.core.params import SPECS
 
 
 @pytest.mark.parametrize("topic", sorted(C.CODECS))
@@ -67,7 +67,7 @@ def test_diagnostics_round_trip():
 def test_raw_diagnostic_arrays_are_rclpys_bytes(statuses):
     from rclpy.serialization import serialize_message
 
-    from hexapod_sim.core.cdr import cdr_padding_mask
+    from hexapod_common.core.cdr import cdr_padding_mask
 
     ours = C.encode_statuses(1_234_567_891, statuses)
     theirs = serialize_message(C.diagnostic_array(1_234_567_891, statuses))
@@ -89,7 +89,7 @@ def test_fill_obs_is_the_inverse_of_state_columns():
 
 
 def test_descriptors_come_from_the_specs():
-    from hexapod_sim.runtime.ros_params import descriptor, is_live
+    from hexapod_common.runtime.ros_params import descriptor, is_live
 
     assert descriptor("robot.leg_length_1", SPECS["robot.leg_length_1"]).read_only
     assert descriptor("sim.dt", SPECS["sim.dt"]).read_only
@@ -111,7 +111,7 @@ def test_inf_in_a_params_file_reaches_the_node(tmp_path):
     import rclpy
     from rclpy.context import Context
 
-    from hexapod_sim.runtime.ros_params import declare_params
+    from hexapod_common.runtime.ros_params import declare_params
 
     path = tmp_path / "p.yaml"
     path.write_text("/**:\n  ros__parameters:\n    actuator:\n      t_max: .inf\n")

@@ -2,7 +2,7 @@
 
 Fast DDS caps a reader's history at 5000 samples whatever the subscription's depth: the
 recorder (RECORD_DEPTH deep), whose main thread yields to the real-time control path,
-kept the first 5000 samples of a topic and silently lost the rest (hexapod_sim/runtime/
+kept the first 5000 samples of a topic and silently lost the rest (hexapod_common/runtime/
 dds_profile.py, READER_MAX_SAMPLES). A real publisher and a real subscription in a fresh
 process with the profile: the subscription takes nothing while more than 5000 samples
 arrive, then takes them all.
@@ -13,8 +13,8 @@ import os
 import subprocess
 import sys
 
-from hexapod_sim.core.topics import RECORD_DEPTH
-from hexapod_sim.runtime.dds_profile import private_profile
+from hexapod_common.core.topics import RECORD_DEPTH
+from hexapod_common.runtime.dds_profile import private_profile
 
 from .conftest import next_domain_id
 

@@ -19,7 +19,7 @@ import time
 
 from hexapod_metrics.core.analysis import analyze_bag
 from hexapod_metrics.bag import open_bag
-from hexapod_sim.core import topics as T
+from hexapod_common.core import topics as T
 
 from .bag_checks import check_indexed_ordered_bag, mcap_size
 from .conftest import sim_summary

@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import pytest
 
-from hexapod_metrics.graph_launcher import EXIT_CODES
+from hexapod_bringup.graph_launcher import EXIT_CODES
 
 from .conftest import call, hexapod_cli, next_domain_id, ros_client, sim_summary
 
@@ -183,9 +183,9 @@ def test_fallback_alone_exits_7(script, tmp_path):
     assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
     assert_uncommanded_cycles_are_labelled(s, "pd_p")
     # the transition a ROS tool made is in the bag: the controller's status says it, at once
-    from hexapod_sim.core import cdr
+    from hexapod_common.core import cdr
     from hexapod_metrics.bag import open_bag
-    from hexapod_sim.core import topics as T
+    from hexapod_common.core import topics as T
 
     states = []
     with open_bag(s.bag) as b:
@@ -378,7 +378,7 @@ def test_full_disk_exits_5_and_stops_the_graph(small_disk, tmp_path):
 ])
 def test_node_started_by_hand_refuses_a_misspelt_params_file(make_graph, tmp_path, node, edit,
                                                              message):
-    from hexapod_sim.core.params import default_params_path
+    from hexapod_common.core.params import default_params_path
 
     f = tmp_path / "typo.yaml"
     f.write_text(default_params_path().read_text().replace(*edit))

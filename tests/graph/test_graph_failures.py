@@ -10,8 +10,8 @@ import yaml
 
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import default_params_path
+from hexapod_common.core import topics as T
+from hexapod_common.core.params import default_params_path
 
 from .bag_checks import mcap_size
 from .conftest import call, fast_params, hexapod_cli, ros_client, sim_summary
@@ -56,7 +56,7 @@ def test_controller_killed_sim_falls_back_and_a_new_controller_takes_over(make_g
 PARAM_GET = """
 import os, sys, time, rclpy
 from rcl_interfaces.srv import GetParameters
-from hexapod_sim.runtime.dds_profile import shm_locks
+from hexapod_common.runtime.dds_profile import shm_locks
 rclpy.init()
 node = rclpy.create_node("param_get_probe")
 ports = lambda: [p.name for p in shm_locks(os.getpid())]
@@ -97,7 +97,7 @@ def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
     import subprocess
     import sys
 
-    from hexapod_sim.runtime.dds_profile import shm_locks
+    from hexapod_common.runtime.dds_profile import shm_locks
 
     g = _lockstep_with_pd_pf(make_graph)
     dead = shm_locks(g.procs["pd_pf_controller"].pid)
@@ -132,7 +132,7 @@ def test_a_controller_says_which_input_it_waited_for_and_what_it_gave_up(make_gr
     gave up once CONTROL_DEPTH were waiting, and reports them at the end."""
     import re
 
-    from hexapod_sim.runtime.conversions import CONTROL_DEPTH
+    from hexapod_common.runtime.conversions import CONTROL_DEPTH
 
     g = make_graph(overrides=("sim.control_period:=0.004", "sim.mode:=realtime"))
     g.start("pd_pf_controller")

@@ -12,7 +12,7 @@ from hexapod_metrics.core.bag_params import read_records
 from hexapod_metrics.bag import open_bag
 from hexapod_metrics.bag.msgdefs import lookup
 from hexapod_metrics.foxglove_layout import LAYOUT_FILE, layout_topics
-from hexapod_sim.core import topics as T
+from hexapod_common.core import topics as T
 
 from .foxglove_ws import collect
 

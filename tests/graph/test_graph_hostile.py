@@ -28,9 +28,9 @@ from hexapod_control.core.closed_loop import run
 from hexapod_control.core.controllers import control_law, controller_code, gain_vector
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_metrics.core.bag_params import bag_params
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core import topics as T
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
 
 from .conftest import fast_params, sim_summary
 
@@ -169,7 +169,7 @@ def _assert_run_unchanged(rec: dict, logs: dict[str, str], mode: str, period: fl
 
 
 def _status_values(rec: dict, node: str) -> dict[str, str]:
-    from hexapod_sim.core import cdr
+    from hexapod_common.core import cdr
 
     last = {}
     for data in rec["status"]:

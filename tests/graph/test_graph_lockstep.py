@@ -10,9 +10,9 @@ import pytest
 
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-from hexapod_metrics.core.simulate import simulate
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import load_params
+from hexapod_bringup.core.simulate import simulate
+from hexapod_common.core import topics as T
+from hexapod_common.core.params import load_params
 
 from .bag_checks import bag_qos
 from .conftest import finish_recorded_run, start_recorded_run

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from hexapod_sim.core import cdr
-from hexapod_sim.core import topics as T
+from hexapod_common.core import cdr
+from hexapod_common.core import topics as T
 
 from .bag_checks import MS, check_indexed_ordered_bag, read_with_rosbags
 
@@ -26,7 +26,7 @@ def _stamp(msg) -> int:
 
 @pytest.fixture(scope="module")
 def graph_bag(tmp_path_factory):
-    from hexapod_metrics.cmd_graph import GraphProcesses
+    from hexapod_bringup.cmd_graph import GraphProcesses
 
     from .conftest import FAST_TIMING, STOP_ORDER, next_domain_id
 

@@ -14,8 +14,8 @@ from hexapod_metrics.core.bag_params import FROM_MCAP, read_records
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
 from hexapod_metrics.core.indices import INDEX_NAMES, indices_from_obs
 from hexapod_metrics.core.recording import RECORDS_KEY
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.layout import O_TH, O_TQ
+from hexapod_common.core import topics as T
+from hexapod_common.core.layout import O_TH, O_TQ
 
 from .conftest import (CLIENT_NODE, call, fast_params, finish_recorded_run, ros_client,
                        start_recorded_run)
@@ -72,9 +72,9 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.serialization import serialize_message
 
-        from hexapod_sim.runtime import conversions as C
-        from hexapod_sim.core.msg_auth import Signer, read_key_file
-        from hexapod_sim.core.param_log import ParamRecord
+        from hexapod_common.runtime import conversions as C
+        from hexapod_common.core.msg_auth import Signer, read_key_file
+        from hexapod_common.core.param_log import ParamRecord
 
         signer = Signer(read_key_file(g.env["HEXAPOD_KEY_FILE"]), T.PARAMETERS)
         forged = ParamRecord("hexapod_sim", "change", 600, 600_000_000, {"ground.scale": 9.0})

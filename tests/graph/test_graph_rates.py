@@ -6,8 +6,8 @@ import numpy as np
 
 from hexapod_control.core.closed_loop import run
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.params import load_params
+from hexapod_common.core import topics as T
+from hexapod_common.core.params import load_params
 
 from .conftest import finish_recorded_run, start_recorded_run
 

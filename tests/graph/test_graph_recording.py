@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from hexapod_metrics.bag import open_bag, read_joint_state_arrays
-from hexapod_sim.core import topics as T
+from hexapod_common.core import topics as T
 
 
 def _mcap_size(bag: Path) -> int:

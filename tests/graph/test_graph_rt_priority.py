@@ -1,4 +1,4 @@
-"""Real-time scheduling of the control path (``rt_priority``, hexapod_sim/runtime/rt_sched.py).
+"""Real-time scheduling of the control path (``rt_priority``, hexapod_common/runtime/rt_sched.py).
 
 In a realtime graph started with ``rt_priority`` the sim's, the controllers' and the
 trajectory generator's main threads and Fast DDS receive and event threads run under
@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from hexapod_sim.runtime.rt_sched import control_path_threads, realtime_permitted
+from hexapod_common.runtime.rt_sched import control_path_threads, realtime_permitted
 
 from .conftest import sim_summary
 

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from hexapod_metrics.bag import open_bag
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.switch_channel import request
-from hexapod_sim.runtime.rt_sched import realtime_permitted
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import topics as T
+from hexapod_common.core.labels import in_charge
+from hexapod_common.core.switch_channel import request
+from hexapod_common.runtime.rt_sched import realtime_permitted
 
 from .conftest import call, hexapod_cli, ros_client, sim_summary
 

@@ -1,7 +1,7 @@
 """The ``inputs_matched`` service a reading node offers the sim before tick 0.
 
 Tick 0 waits until the readers of the sim's topics have matched its writers on their own
-side (hexapod_sim/runtime/inputs_matched.py). Real rclpy endpoints in a fresh process with
+side (hexapod_common/runtime/inputs_matched.py). Real rclpy endpoints in a fresh process with
 the graph's Fast DDS profile: a node reading joint states and references answers "not
 matched" naming the joint states while no one publishes them (a reference publisher does
 not count: the sim does not write references), then "matched" once a joint-state writer
@@ -19,8 +19,8 @@ import re
 import subprocess
 import sys
 
-from hexapod_sim.core.msg_auth import new_key_file
-from hexapod_sim.runtime.dds_profile import private_profile
+from hexapod_common.core.msg_auth import new_key_file
+from hexapod_common.runtime.dds_profile import private_profile
 
 from .conftest import next_domain_id
 
@@ -30,11 +30,11 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-from hexapod_sim.core import topics as T
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
+from hexapod_common.core import topics as T
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
 
-from hexapod_sim.runtime.input_guard import InputGuard
+from hexapod_common.runtime.input_guard import InputGuard
 
 rclpy.init()
 reader = rclpy.create_node("metrics")
@@ -126,8 +126,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
 
 rclpy.init()
 node = rclpy.create_node("markers")  # the markers node's name, without the run's key
@@ -156,7 +156,7 @@ def test_an_impostor_cannot_start_the_run(make_graph, tmp_path):
     ``inputs_matched`` service, says "ready" at once: the sim drops every such answer
     (counted, named in its log) and starts only after INPUTS_TIMEOUT, with an error naming
     markers, as when the real node's readers do not match."""
-    from hexapod_sim.core.msg_auth import KEY_ENV
+    from hexapod_common.core.msg_auth import KEY_ENV
 
     g = make_graph()
     for n in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):

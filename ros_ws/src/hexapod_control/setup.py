@@ -14,7 +14,8 @@ setup(
     maintainer='Hexapod testbed maintainers',
     maintainer_email='maintainers@hexapod.invalid',
     description=(
-        'Gait and reference generation and the PD-P / PD-PF controllers (lifecycle nodes).'
+        'The controllers (PD-P, PD-P&F) and the trajectory generator node, and the in-process '
+        'closed loop.'
     ),
     license='Apache-2.0',
     entry_points={

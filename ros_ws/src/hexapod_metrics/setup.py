@@ -14,13 +14,12 @@ setup(
     maintainer='Hexapod testbed maintainers',
     maintainer_email='maintainers@hexapod.invalid',
     description=(
-        'Performance indices, bag recording and analysis, experiments and the hexapod CLI.'
+        'Performance indices, the recorder, bags and the offline analysis.'
     ),
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
             'metrics = hexapod_metrics.metrics_node:main',
-            'hexapod = hexapod_metrics.cli:main',
             'markers = hexapod_metrics.marker_node:main',
             'foxglove_bridge = hexapod_metrics.foxglove_node:main',
         ],

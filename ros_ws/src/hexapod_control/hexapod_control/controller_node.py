@@ -10,7 +10,7 @@ over: the sim refuses a switch to it); *cleanup* removes everything. With ``auto
 is needed; the lifecycle services keep working (``hexapod switch`` uses them).
 
 Per tick: a ``/hexapod/joint_states`` message whose header.frame_id names this controller
-(``hexapod_sim.core.labels.in_charge``) is answered once the reference and the foot forces
+(``hexapod_common.core.labels.in_charge``) is answered once the reference and the foot forces
 with the same stamp are there (both architectures wait for the same set, so
 their timing is the same): the demanded torque
 T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exactly as
@@ -19,7 +19,7 @@ T_C = :func:`hexapod_control.core.controllers.control_law` of that sample, exact
 architecture's name. References and foot forces queue in their subscriptions without
 waking the node (the last ``conversions.CONTROL_DEPTH`` of each) and are taken at every state, so a
 controller that is not in charge costs one wake-up per tick and is ready to take over at
-any tick boundary. Every input goes through the guard (``hexapod_sim.runtime.input_guard``) and
+any tick boundary. Every input goes through the guard (``hexapod_common.runtime.input_guard``) and
 every command is signed with the run's key.
 
 A controller that is not in charge still wakes at every state (the first state that names it
@@ -38,25 +38,25 @@ import time
 from typing import Any
 
 import numpy as np
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core import topics as T
-from hexapod_sim.core import trace as _trace
-from hexapod_sim.core.trace import header_stamp
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.params import N_LEGS, HexapodParams
-from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
-from hexapod_sim.runtime.input_guard import InputGuard
-from hexapod_sim.runtime.node_main import run_node
-from hexapod_sim.runtime.param_topic import ParamAnnouncer
-from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from hexapod_sim.runtime.rt_sched import use_rt_priority
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
+from hexapod_common.core import trace as _trace
+from hexapod_common.core.trace import header_stamp
+from hexapod_common.core.labels import in_charge
+from hexapod_common.core.params import N_LEGS, HexapodParams
+from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_common.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
 
 from .core.controllers import control_law, controller_code, gain_vector
 from .core.waits import InputWaits

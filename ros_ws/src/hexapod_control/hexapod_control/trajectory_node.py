@@ -10,11 +10,11 @@ must cover the ticks of one interval (50 ticks: 10 kHz of simulated ticks per wa
 second); a controller whose reference is late waits for it. ``publish_interval: 0.0``
 publishes at every state. Each message is
 stamped with the time it is for; its columns are
-:func:`hexapod_sim.core.topics.reference_columns` of :func:`hexapod_sim.core.gait.reference`
+:func:`hexapod_common.core.topics.reference_columns` of :func:`hexapod_common.core.gait.reference`
 (paper eqs. 1-4). References are computed a block of ticks at a time, at the same instants
 ``k * control period`` as the in-process loop, so the numbers are identical to it.
 
-The publisher is transient-local (see hexapod_sim.runtime.conversions.TOPIC_QOS): a controller or
+The publisher is transient-local (see hexapod_common.runtime.conversions.TOPIC_QOS): a controller or
 recorder that matches late still receives the recent references.
 """
 from __future__ import annotations
@@ -23,21 +23,21 @@ import sys
 import time
 
 import numpy as np
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
-from hexapod_sim.runtime.input_guard import InputGuard
-from hexapod_sim.runtime.node_main import run_node
-from hexapod_sim.runtime.param_topic import ParamAnnouncer
-from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from hexapod_sim.runtime.rt_sched import use_rt_priority
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
+from hexapod_common.core.gait import Reference, reference
+from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_common.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
 
 BLOCK_TICKS = 250  # references computed per block (~0.4 ms), the next one ahead of need
 MAX_GAP = 10000  # ticks of missed clock messages filled in at most

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from hexapod_sim.core import topics as T
+from hexapod_common.core import topics as T
 
 from .core.indices import INDEX_NAMES
 

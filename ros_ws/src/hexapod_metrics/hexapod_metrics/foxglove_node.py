@@ -18,18 +18,18 @@ import struct
 import sys
 from typing import Any
 
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.errors import HexapodError
-from hexapod_sim.core.topics import TOPICS
-from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
-from hexapod_sim.runtime.input_guard import SIGNED_TOPICS, InputGuard
-from hexapod_sim.runtime.node_main import run_node
-from hexapod_sim.runtime.param_topic import ParamAnnouncer
-from hexapod_sim.runtime.ros_params import declare_node_param
-from hexapod_sim.runtime.rt_sched import use_rt_priority
+from hexapod_common.core import topics as T
+from hexapod_common.core.errors import HexapodError
+from hexapod_common.core.topics import TOPICS
+from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_common.runtime.input_guard import SIGNED_TOPICS, InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import declare_node_param
+from hexapod_common.runtime.rt_sched import use_rt_priority
 from rclpy.node import Node
 
-from hexapod_sim.runtime import conversions as C
+from hexapod_common.runtime import conversions as C
 
 from .bag.msgdefs import lookup
 

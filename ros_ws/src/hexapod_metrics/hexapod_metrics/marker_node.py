@@ -16,21 +16,21 @@ import time
 import numpy as np
 from builtin_interfaces.msg import Duration as DurationMsg
 from geometry_msgs.msg import Point
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.layout import OBS_SHAPE
-from hexapod_sim.runtime.hot_loop import HotLoop
-from hexapod_sim.runtime.input_guard import InputGuard
-from hexapod_sim.runtime.node_main import run_node
-from hexapod_sim.runtime.param_topic import ParamAnnouncer
-from hexapod_sim.runtime.ros_params import declare_node_param, declare_params
-from hexapod_sim.runtime.rt_sched import use_rt_priority
+from hexapod_common.core import topics as T
+from hexapod_common.core.layout import OBS_SHAPE
+from hexapod_common.runtime.hot_loop import HotLoop
+from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import declare_node_param, declare_params
+from hexapod_common.runtime.rt_sched import use_rt_priority
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
 
 from .core.figure import FORCE_SCALE, side, stick_figure
 

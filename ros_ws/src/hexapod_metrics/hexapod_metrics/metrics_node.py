@@ -1,6 +1,6 @@
 """Node ``metrics``: records every topic of the contract to a bag and scores each gait cycle.
 
-Every topic is taken raw, authenticated and checked (``hexapod_sim.runtime.input_guard``: a
+Every topic is taken raw, authenticated and checked (``hexapod_common.runtime.input_guard``: a
 dropped message is counted and reported, never recorded) and its payload written to a
 rosbag2/MCAP bag (:class:`~hexapod_metrics.bag.BagWriter`) at ``bag_path`` with the topic
 table's QoS; ``/clock`` is written from the authenticated joint states. Log time = the
@@ -11,7 +11,7 @@ go into the MCAP as checksummed metadata (``core/recording.py``). A failed write
 disk) closes the bag at its last chunk, reports ERROR on ``/hexapod/status`` and exits
 with :data:`EXIT_RECORDING_FAILED` (3); 0 clean, 1 other error, 2 bad parameters. Each gait
 cycle is scored by :mod:`~hexapod_metrics.core.cycles`, published on ``/hexapod/indices``
-with its label (``hexapod_sim.core.labels``) and listed in ``indices.json`` at close.
+with its label (``hexapod_common.core.labels``) and listed in ``indices.json`` at close.
 """
 from __future__ import annotations
 
@@ -22,25 +22,25 @@ from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from hexapod_sim.core import msg_checks as M
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
-from hexapod_sim.core.params import CONTROLLERS
-from hexapod_sim.core.topics import TICK_TOPICS, TOPICS
-from hexapod_sim.runtime.hot_loop import FastLogger, HotLoop
-from hexapod_sim.runtime.input_guard import InputGuard
-from hexapod_sim.runtime.node_main import run_node
-from hexapod_sim.runtime.param_topic import ParamAnnouncer
-from hexapod_sim.runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from hexapod_sim.runtime.rt_sched import use_rt_priority
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
+from hexapod_common.core.labels import in_charge
+from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_common.core.params import CONTROLLERS
+from hexapod_common.core.topics import TICK_TOPICS, TOPICS
+from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_common.runtime.rt_sched import use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-from hexapod_sim.runtime import conversions as C
-from hexapod_sim.runtime import inputs_matched
-from hexapod_sim.core import cdr
-from hexapod_sim.core.errors import CdrError
+from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime import inputs_matched
+from hexapod_common.core import cdr
+from hexapod_common.core.errors import CdrError
 
 from .bag import BagError, BagStorageError, BagWriter
 from .core.cycles import CYCLE_TOPICS, Cycle, CycleScorer, segments

@@ -38,8 +38,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .core.layout import GRAVITY
-from .core.params import N_LEGS, HexapodParams
+from hexapod_common.core.layout import GRAVITY
+from hexapod_common.core.params import N_LEGS, HexapodParams
 
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco

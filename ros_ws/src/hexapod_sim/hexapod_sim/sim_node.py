@@ -28,23 +28,23 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from .runtime import conversions as C
-from .core import msg_checks as M
-from .core import topics as T
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
 from .core.actuator import saturate
 from .core.engine import Physics
-from .core.errors import ParameterError
-from .core.params import N_LEGS, HexapodParams, check_controller
-from .core.switch_channel import ChannelError, SwitchServer
-from .core import trace as _trace
+from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
+from hexapod_common.core.switch_channel import ChannelError, SwitchServer
+from hexapod_common.core import trace as _trace
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
-from .runtime.hot_loop import FastLogger, HotLoop
-from .runtime import inputs_matched
-from .runtime.input_guard import InputGuard
-from .runtime.node_main import run_node
-from .runtime.param_topic import ParamAnnouncer
-from .runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from .runtime.rt_sched import use_rt_priority
+from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
+from hexapod_common.runtime import inputs_matched
+from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.param_topic import ParamAnnouncer
+from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
+from hexapod_common.runtime.rt_sched import use_rt_priority
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {

@@ -16,8 +16,8 @@ from hexapod_sim.core.actuator import clip_torque
 from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_sample,
                                             block_scratch, block_solve, swap_columns)
 from hexapod_sim.core.engine import state_ok
-from hexapod_sim.core.layout import P_L1, P_L2, P_TMAX, Q0, V0
-from hexapod_sim.core.params import N_LEGS
+from hexapod_common.core.layout import P_L1, P_L2, P_TMAX, Q0, V0
+from hexapod_common.core.params import N_LEGS
 
 from .controllers import leg_demand
 

@@ -23,10 +23,10 @@ from numba import njit
 from hexapod_sim.core.actuator import saturate
 from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
                                      scratch)
-from hexapod_sim.core.gait import Reference, reference
-from hexapod_sim.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
-from hexapod_sim.core.errors import ParameterError
-from hexapod_sim.core.params import N_LEGS, HexapodParams
+from hexapod_common.core.gait import Reference, reference
+from hexapod_common.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
+from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.params import N_LEGS, HexapodParams
 
 from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controllers import control_law, controller_code, gain_vector

@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from hexapod_sim.core.kinematics import foot_force_torque
-from hexapod_sim.core.layout import O_FF, O_TH, O_THV
-from hexapod_sim.core.params import CONTROLLERS, GainParams, check_controller
+from hexapod_common.core.kinematics import foot_force_torque
+from hexapod_common.core.layout import O_FF, O_TH, O_THV
+from hexapod_common.core.params import CONTROLLERS, GainParams, check_controller
 
 #: Integer codes of the architectures inside compiled code, in the order of CONTROLLERS.
 PD_P, PD_PF = 0, 1

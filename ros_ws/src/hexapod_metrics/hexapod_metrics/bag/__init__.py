@@ -4,7 +4,7 @@ The only code that touches MCAP bytes. Write with :class:`BagWriter` (crash-safe
 chunk is followed by a complete, indexed tail), read with :func:`open_bag` (complete bags
 from their summary, cut-short ones scanned up to the last complete record, JointStates
 decoded vectorised chunk by chunk). Message definitions come from the installed ``.msg``
-files (:mod:`.msgdefs`); CDR is ``hexapod_sim.core.cdr``. Everything here is ROS-free.
+files (:mod:`.msgdefs`); CDR is ``hexapod_common.core.cdr``. Everything here is ROS-free.
 """
 
 from __future__ import annotations

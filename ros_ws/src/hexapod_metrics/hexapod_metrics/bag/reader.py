@@ -23,9 +23,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from hexapod_sim.core import cdr
-from hexapod_sim.core.cdr import JointStateArrays, JointStateDecoder
-from hexapod_sim.core.errors import CdrError
+from hexapod_common.core import cdr
+from hexapod_common.core.cdr import JointStateArrays, JointStateDecoder
+from hexapod_common.core.errors import CdrError
 from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
 
 from ._closing import Closing

@@ -61,7 +61,7 @@ from typing import NamedTuple, Self
 
 import numpy as np
 import numpy.typing as npt
-from hexapod_sim.core import cdr
+from hexapod_common.core import cdr
 from isal.isal_zlib import crc32  # zlib's CRC-32, about 4x faster (ISA-L)
 from mcap.data_stream import RecordBuilder
 from mcap.records import (

@@ -8,7 +8,7 @@ node's numbers.
 
 Cycles are scored by the one scorer (core/cycles.py), as online. Which controller was in
 charge at each tick, and whether it commanded each torque, comes from the ``header.frame_id``
-of ``/hexapod/joint_states`` (``hexapod_sim.core.labels``); a cycle with held or fallback
+of ``/hexapod/joint_states`` (``hexapod_common.core.labels``); a cycle with held or fallback
 torques is labelled so, never with the controller's name. Segments are split at changes of
 the controller in charge, i.e. at the recorded switches, and at every recorded parameter
 change (bag_params.py), each segment naming the values that differ from the start; a
@@ -22,13 +22,13 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.cdr import decode_diagnostic_array
-from hexapod_sim.core.errors import CdrError
-from hexapod_sim.core.labels import in_charge
-from hexapod_sim.core.layout import O_HP, O_TQ
-from hexapod_sim.core.param_log import ParamTimeline
-from hexapod_sim.core.params import HexapodParams
+from hexapod_common.core import topics as T
+from hexapod_common.core.cdr import decode_diagnostic_array
+from hexapod_common.core.errors import CdrError
+from hexapod_common.core.labels import in_charge
+from hexapod_common.core.layout import O_HP, O_TQ
+from hexapod_common.core.param_log import ParamTimeline
+from hexapod_common.core.params import HexapodParams
 
 from ..bag import Bag, BagReadError, iter_joint_state_blocks, open_bag
 from .bag_params import bag_params
@@ -106,7 +106,7 @@ class BagAnalysis:
 
 def controller_changes(bag: Bag, dt_ns: int) -> list[tuple[int, str]]:
     """(first tick, controller in charge) at the start and at every change of it (the
-    controller named by joint_states' frame_id, ``hexapod_sim.core.labels``)."""
+    controller named by joint_states' frame_id, ``hexapod_common.core.labels``)."""
     frames: dict[str, list[tuple[int, str]]] = {T.JOINT_STATES: []}
     for _ in iter_joint_state_blocks(bag, [T.JOINT_STATES], frames=frames):
         pass

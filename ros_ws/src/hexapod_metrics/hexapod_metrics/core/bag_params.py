@@ -1,6 +1,6 @@
 """The parameters a bag records: checksummed records in the MCAP, mirrored in metadata.yaml.
 
-The MCAP's Metadata records named ``hexapod_parameters`` (hexapod_sim/core/param_log.py) are
+The MCAP's Metadata records named ``hexapod_parameters`` (hexapod_common/core/param_log.py) are
 the truth: each node's start values and every runtime change with the tick it took
 effect. They are read from a bare ``.mcap`` as well as from a bag directory, and also from a
 file whose writer was killed (the records are written at once, outside the chunks).
@@ -14,10 +14,10 @@ from __future__ import annotations
 import json
 from typing import Any, NamedTuple
 
-from hexapod_sim.core.errors import HexapodError
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord, ParamRecordError, ParamTimeline
-from hexapod_sim.core.param_log import timeline as make_timeline
-from hexapod_sim.core.params import SPECS, HexapodParams, from_flat, load_params
+from hexapod_common.core.errors import HexapodError
+from hexapod_common.core.param_log import RECORD_NAME, ParamRecord, ParamRecordError, ParamTimeline
+from hexapod_common.core.param_log import timeline as make_timeline
+from hexapod_common.core.params import SPECS, HexapodParams, from_flat, load_params
 
 from ..bag import Bag
 from ..bag import BagReadError

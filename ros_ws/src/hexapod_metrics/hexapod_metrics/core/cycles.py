@@ -2,7 +2,7 @@
 
 Samples of the four state topics (:data:`CYCLE_TOPICS`) come in per tick, as serialized
 JointStates (the node, ``simulate --bag``) or as decoded blocks (the bag reader); the
-controller labels come from joint_states' frame_id (``hexapod_sim.core.labels``). Gait
+controller labels come from joint_states' frame_id (``hexapod_common.core.labels``). Gait
 cycle c spans ticks k_a = c M .. k_b = (c + 1) M (M = T / Delta t) and is scored
 (:func:`~.indices.sums_from_obs`, samples 1..M, as the engine) once every topic has
 reached k_b (a tick missing in it: the cycle has no sums), or, live, once a topic is far past
@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from hexapod_sim.core import labels as L
-from hexapod_sim.core import topics as T
+from hexapod_common.core import labels as L
+from hexapod_common.core import topics as T
 
-from hexapod_sim.core.cdr import decode_joint_state_batch
+from hexapod_common.core.cdr import decode_joint_state_batch
 from .indices import REPORTED_NAMES, Indices, WindowSums, lag_growth, sums_from_obs
 
 #: The state topics a cycle's indices need, all stamped per tick.

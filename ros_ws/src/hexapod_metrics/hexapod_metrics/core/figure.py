@@ -10,8 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hexapod_sim.core.kinematics import knee_offset
-from hexapod_sim.core.layout import O_FF, O_FP, O_HP, O_TH
+from hexapod_common.core.kinematics import knee_offset
+from hexapod_common.core.layout import O_FF, O_FP, O_HP, O_TH
 
 #: Lateral offset (m) of the left (+) and right (-) legs in 3-D drawings.
 SIDE_OFFSET = 0.5

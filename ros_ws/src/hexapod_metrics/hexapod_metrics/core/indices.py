@@ -25,9 +25,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hexapod_sim.core.errors import ParameterError
-from hexapod_sim.core.layout import O_FP, O_HF, O_HP, O_THV, O_TQ
-from hexapod_sim.core.params import HexapodParams
+from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.layout import O_FP, O_HF, O_HP, O_THV, O_TQ
+from hexapod_common.core.params import HexapodParams
 
 #: Index names in report order, with units.
 INDEX_NAMES = ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF")
@@ -128,7 +128,7 @@ def sums_from_obs(obs: np.ndarray, hip_ref: np.ndarray, foot_ref: np.ndarray,
 
 def indices_from_obs(obs: np.ndarray, hip_ref: np.ndarray, foot_ref: np.ndarray,
                      dt: float) -> Indices:
-    """Indices from observation samples (N+1, 9, 6, 2) (hexapod_sim.core.layout) and refs."""
+    """Indices from observation samples (N+1, 9, 6, 2) (hexapod_common.core.layout) and refs."""
     return sums_from_obs(obs, hip_ref, foot_ref, dt).indices()
 
 

@@ -1,7 +1,7 @@
 """What a bag of this project holds, and writing an in-process run in exactly that format.
 
 Both the metrics node and ``hexapod simulate --bag`` record the topics of the one topic table
-(``hexapod_sim.core.topics.TOPICS``) with its QoS, and score cycles with the one scorer
+(``hexapod_common.core.topics.TOPICS``) with its QoS, and score cycles with the one scorer
 (``core/cycles.py``); the analysis reads either kind of bag.
 """
 from __future__ import annotations
@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 from hexapod_control.core.closed_loop import RunResult
-from hexapod_sim.core import topics as T
-from hexapod_sim.core.labels import state_frame
-from hexapod_sim.core.layout import O_HP
-from hexapod_sim.core.param_log import RECORD_NAME, ParamRecord
-from hexapod_sim.core.params import SPECS, HexapodParams, from_flat
+from hexapod_common.core import topics as T
+from hexapod_common.core.labels import state_frame
+from hexapod_common.core.layout import O_HP
+from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_common.core.params import SPECS, HexapodParams, from_flat
 
-from hexapod_sim.core import cdr
-from hexapod_sim.core.cdr import DiagnosticStatus
+from hexapod_common.core import cdr
+from hexapod_common.core.cdr import DiagnosticStatus
 
 from ..bag import BagWriter
 from .cycles import Cycle, CycleScorer, indices_values
@@ -31,7 +31,7 @@ RECORDS_KEY = "hexapod_parameter_records"
 SIM_NODE = "hexapod_sim"
 #: The writer of in-process bags, as named in their parameter records.
 SIMULATE_NODE = "hexapod simulate"
-#: The recorded topics: the one topic table (type, QoS, depth) of ``hexapod_sim.core.topics``.
+#: The recorded topics: the one topic table (type, QoS, depth) of ``hexapod_common.core.topics``.
 TOPICS = T.TOPICS
 TICK_TOPICS = T.TICK_TOPICS
 

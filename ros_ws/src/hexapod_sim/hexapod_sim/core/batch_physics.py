@@ -20,10 +20,11 @@ from .body import LINKS, link_force
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .engine import W_BIAS, W_CS, W_FACTOR, W_FG, W_JAC, W_SIZE, W_W, leg_sample
-from .kinematics import foot_offset_cs, foot_velocity_cs
-from .layout import (C0, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL, P_KBX, P_KBY,
-                     P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, V0, X0)
-from .params import N_LEGS
+from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
+from hexapod_common.core.layout import (C0, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL,
+                                        P_KBX, P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK,
+                                        P_MU, Q0, V0, X0)
+from hexapod_common.core.params import N_LEGS
 
 #: Columns of every block array. A compile-time row length lets LLVM see that the rows of
 #: one array never overlap, so the loops over cases vectorise with a few alias checks.

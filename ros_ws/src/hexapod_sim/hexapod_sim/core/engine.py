@@ -25,13 +25,14 @@ from numba import njit
 from .body import body_forces
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
-from .errors import DivergenceError
-from .gait import reference
-from .kinematics import foot_offset_cs, foot_velocity_cs
-from .layout import (C0, OBS_FIELDS, OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX,
-                     P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0,
-                     STATE_SIZE, V0, X0, legs, model_vector)
-from .params import N_LEGS, HexapodParams
+from hexapod_common.core.errors import DivergenceError
+from hexapod_common.core.gait import reference
+from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
+from hexapod_common.core.layout import (C0, OBS_FIELDS, OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY,
+                                        P_DT, P_G, P_HIPX, P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY,
+                                        P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
+                                        legs, model_vector)
+from hexapod_common.core.params import N_LEGS, HexapodParams
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
 MAX_COORD = 1e4

@@ -33,13 +33,13 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from . import labels as L
-from . import trace as _trace
+from hexapod_common.core import labels as L
+from hexapod_common.core import trace as _trace
 from .actuator import saturate
 from .engine import Physics
-from .layout import O_THV, P_TMAX
-from .params import N_LEGS, HexapodParams
-from .topics import stamp_ns
+from hexapod_common.core.layout import O_THV, P_TMAX
+from hexapod_common.core.params import N_LEGS, HexapodParams
+from hexapod_common.core.topics import stamp_ns
 
 RESYNC_TICKS = 20    # realtime: re-anchor the schedule when this many periods behind
 SWITCH_WINDOW = 3    # ticks after a switch whose misses count as caused by it

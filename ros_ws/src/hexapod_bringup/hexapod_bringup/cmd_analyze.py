@@ -1,0 +1,161 @@
+"""`hexapod analyze BAG...`: indices per controller segment and per gait cycle, CSV/JSON, plots;
+`hexapod reindex BAG`: a cut-short bag rewritten complete, for the other readers."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from pathlib import Path
+
+from hexapod_metrics.bag import reindex
+from hexapod_metrics.core.analysis import BagAnalysis, SegmentResult, analyze_bag
+from hexapod_metrics.core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, lag_growth
+
+
+def _fmt(idx: Indices | None, name: str) -> str:
+    return "-" if idx is None else f"{getattr(idx, name):.5g}"
+
+
+def _changed(s: SegmentResult) -> str:
+    """' name=value,...' of the parameters changed since the start, '' if none."""
+    return (" " + ",".join(f"{n}={v:g}" if isinstance(v, float) else f"{n}={v}"
+                           for n, v in s.params)) if s.params else ""
+
+
+def _rows(a: BagAnalysis) -> list[dict[str, object]]:
+    rows: list[dict[str, object]] = []
+    for s in a.segments:
+        rows.append({"bag": str(a.path), "kind": "segment", "controller": s.controller,
+                     "cycle": "", "t_start": s.t_start, "t_end": s.t_end, "cycles": s.cycles,
+                     "params_changed": _changed(s).strip(),
+                     **{n: getattr(s.indices, n) if s.indices else math.nan
+                        for n in REPORTED_NAMES}})
+    for c in a.cycles:
+        idx = c.indices
+        rows.append({"bag": str(a.path), "kind": "cycle", "controller": c.controller,
+                     "cycle": c.cycle, "t_start": c.t_a, "t_end": c.t_b, "cycles": 1,
+                     "params_changed": "",
+                     **{n: getattr(idx, n) if idx else math.nan for n in REPORTED_NAMES}})
+    return rows
+
+
+def _print(analyses: list[BagAnalysis], per_cycle: bool) -> None:
+    for a in analyses:
+        note = f"  TRUNCATED: {a.truncation_reason}" if a.truncated else ""
+        print(f"{a.path}: {a.ticks} ticks, {len(a.cycles)} full gait cycles, parameters "
+              f"{a.params_source}{note}")
+        if len(a.switches) > 1:
+            print("  switches: " + ", ".join(f"{c} at {t:.3f} s" for t, c in a.switches[1:]))
+        if a.param_changes:
+            print("  parameter changes (applied from that tick on): " + ", ".join(
+                f"{n} = {v!r} at {t:.3f} s ({node})" for t, node, n, v in a.param_changes))
+    cols = [(a, s) for a in analyses for s in a.segments]
+    many = len(analyses) > 1
+    heads = [f"{(a.path.name + ':') if many else ''}{s.controller} "
+             f"[{s.t_start:g}-{s.t_end:g}s]{_changed(s)}" for a, s in cols]
+    width = max([14] + [len(h) + 1 for h in heads])
+    print(f"\n{'segment':<8}" + "".join(f"{h:>{width}}" for h in heads))
+    print(f"{'cycles':<8}" + "".join(f"{s.cycles:>{width}}" for _, s in cols))
+    for n in REPORTED_NAMES:
+        print(f"{n:<8}" + "".join(f"{_fmt(s.indices, n):>{width}}" for _, s in cols))
+    if per_cycle:
+        for a in analyses:
+            print(f"\n{a.path.name}: per gait cycle")
+            print(f"{'cycle':>5} {'t_a':>7} {'controller':>10} " +
+                  " ".join(f"{n:>10}" for n in INDEX_NAMES + ("lag_xH",)) +
+                  f" {'lag growth':>10}")
+            prev = None
+            for c in a.cycles:
+                idx = c.indices
+                growth = lag_growth(prev.indices, idx) if prev is not None and \
+                    prev.cycle == c.cycle - 1 else math.nan
+                vals = (" ".join(f"{_fmt(idx, n):>10}" for n in INDEX_NAMES + ("lag_xH",))
+                        + f" {growth:>10.3g}" if idx else
+                        f"incomplete: {c.missing} ticks missing")
+                print(f"{c.cycle:>5} {c.t_a:>7.3g} {c.controller:>10} {vals}")
+                prev = c
+
+
+def _plots(analyses: list[BagAnalysis], out: Path) -> list[Path]:
+    from hexapod_bringup import plots
+
+    out.mkdir(parents=True, exist_ok=True)
+    many = len(analyses) > 1
+    series: dict[str, dict[str, tuple]] = {k: {} for k in plots.TIME_SIGNALS}
+    for a in analyses:
+        t, values, labels = a.series.arrays()
+        for who in dict.fromkeys(labels):
+            sel = labels == who
+            name = f"{a.path.name}:{plots.label(who)}" if many else who
+            for j, key in enumerate(plots.TIME_SIGNALS):
+                # NaN between separate stretches of one controller so lines do not jump
+                tt = t[sel].astype(float)
+                vv = values[sel, j].astype(float)
+                gaps = tt[1:] - tt[:-1] > 2 * a.series.stride * a.params.sim.control_period
+                if gaps.any():
+                    cut = 1 + gaps.nonzero()[0]
+                    tt = insert_nan(tt, cut)
+                    vv = insert_nan(vv, cut)
+                series[key][name] = (tt, vv)
+    paths = []
+    for key, (title, _) in plots.TIME_SIGNALS.items():
+        path = out / f"{key}.png"
+        plots.time_plot(series[key], key, path, f"{title} of leg 1")
+        paths.append(path)
+    return paths
+
+
+def insert_nan(a, where):  # type: ignore[no-untyped-def]
+    """``a`` with NaN inserted before each index in ``where``."""
+    import numpy as np
+
+    return np.insert(a, where, np.nan)
+
+
+def _cmd_analyze(args: argparse.Namespace) -> int:
+    analyses = [analyze_bag(b) for b in args.bags]
+    _print(analyses, args.cycles)
+    rows = [r for a in analyses for r in _rows(a)]
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+        print(f"\nCSV: {args.csv}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
+        print(f"JSON: {args.json}")
+    if not args.no_plots:
+        paths = _plots(analyses, Path(args.plots))
+        print("plots: " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _cmd_reindex(args: argparse.Namespace) -> int:
+    src = Path(args.bag)
+    out = Path(args.out) if args.out else src.with_name(src.name + "_reindexed")
+    r = reindex(src, out)
+    print(f"{r.path}: {r.messages} messages on {r.topics} topics from {src} ({r.reason}); "
+          "indexed, opens in any MCAP reader")
+    return 0
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register `analyze` and `reindex`."""
+    rp = sub.add_parser("reindex", help="rewrite a cut-short bag (killed recorder) as a "
+                        "complete, indexed one")
+    rp.add_argument("bag", metavar="BAG", help="bag directory or .mcap file")
+    rp.add_argument("--out", help="new bag directory (default BAG_reindexed)")
+    rp.set_defaults(func=_cmd_reindex)
+    ap = sub.add_parser("analyze", help="indices of recorded bags, per segment and gait cycle")
+    ap.add_argument("bags", nargs="+", metavar="BAG", help="bag directory or .mcap file")
+    ap.add_argument("--cycles", action="store_true", help="also print every gait cycle")
+    ap.add_argument("--csv", help="write segments and cycles to this CSV file")
+    ap.add_argument("--json", help="write segments and cycles to this JSON file")
+    ap.add_argument("--plots", default="analysis", help="directory for the PNG time plots")
+    ap.add_argument("--no-plots", action="store_true", help="skip the plots")
+    ap.set_defaults(func=_cmd_analyze)
+
+
+__all__ = ["add_parser"]

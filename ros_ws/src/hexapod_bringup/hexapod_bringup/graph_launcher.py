@@ -1,0 +1,546 @@
+"""The one launcher of the ROS 2 node graph (``scripts/run_graph.sh`` is a thin wrapper).
+
+Runs the simulator, the trajectory generator, both controllers and the recorder (and
+optionally the markers node) as processes of one :class:`~.cmd_graph.GraphProcesses`,
+waits for the sim to finish (``--duration``) or for Ctrl-C / SIGTERM, stops every node,
+prints the indices of each controller segment and the bag's path, and exits with a code
+that says what went wrong (:data:`EXIT_CODES`).
+
+Before any node starts, the settings are checked the way ``hexapod simulate`` checks them
+(the same parser, the same messages, :mod:`.cli_args`): a bad option, an unknown or
+misspelt key, an empty or wrongly shaped params file is one line and exit code 2. The
+nodes then read one params file written by this launcher from the validated values
+(numbers as numbers, no ``-p`` type surprises) into a private run directory (``mkdtemp``,
+mode 0700) that also holds the Fast DDS profile and the sim's summary.
+
+While the graph runs, any node that exits is reported at once (name, exit code or
+signal); a dead recorder stops the run (nothing would be recorded). At the end the sim's
+summary (``summary_path``) says whether a fallback happened and which ticks were not
+commanded by the controller in charge: a cycle with such ticks is labelled ``mixed`` (or
+``fallback`` if all of its ticks were), never with a controller's name alone.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import yaml
+
+from hexapod_control.core.waits import parse as parse_waits
+from hexapod_common.core.errors import HexapodError
+from hexapod_common.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
+from hexapod_common.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
+                                        default_params_path, load_params, read_params_file)
+
+from .cli_args import OneLineParser, control_rate, number, overrides_from_args, param_value
+from .cmd_graph import RT_NODES, GraphProcesses
+
+#: Exit codes of the launcher, one per cause (the first that applies, in this order).
+EXIT_CODES: dict[str, int] = {
+    "ok": 0,
+    "bad settings": 2,           # bad option, params file or parameter (nothing started)
+    "disk full": 5,              # the recorder ran out of disk space
+    "recorder failed": 4,        # the recorder (metrics) died or exited non-zero
+    "node died": 3,              # another node died or exited non-zero during the run
+    "diverged": 6,               # the model blew up (the sim says so and stops)
+    "fallback": 7,               # the controller in charge went silent: damping fallback
+    "interrupted": 130,          # Ctrl-C / SIGTERM of a run with a set duration
+}
+#: Order in which causes decide the exit code.
+PRECEDENCE = ("disk full", "recorder failed", "node died", "diverged", "fallback",
+              "interrupted")
+#: Stop order: the sim first, the recorder last (it drains its queues).
+STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
+              "markers", "foxglove_bridge", "metrics")
+#: Words in the recorder's log (or its exit) that mean the disk is full.
+DISK_FULL_MARKERS = ("No space left on device", "ENOSPC", "disk full")
+#: Free bytes below which a failed recorder's disk counts as full.
+DISK_FULL_BYTES = 1 << 20
+#: Exit code of a recorder whose bag could not be written to the end (disk full, quota, I/O
+#: error): metrics_node.EXIT_RECORDING_FAILED; its log line says which.
+RECORDER_WRITE_FAILED_EXIT = 3
+
+
+class LaunchError(HexapodError):
+    """The graph cannot be started as asked (bad bag path, params file, option)."""
+
+
+@dataclass
+class Outcome:
+    """What happened in one run: causes (each with its line) and the node exit codes."""
+
+    causes: dict[str, str] = field(default_factory=dict)
+    codes: dict[str, int | None] = field(default_factory=dict)
+
+    def add(self, cause: str, line: str) -> None:
+        """Record ``cause`` (first line per cause kept)."""
+        self.causes.setdefault(cause, line)
+
+    def exit_code(self) -> int:
+        """The code of the first cause in :data:`PRECEDENCE` (0 if none)."""
+        for cause in PRECEDENCE:
+            if cause in self.causes:
+                return EXIT_CODES[cause]
+        return 0
+
+
+# --------------------------------------------------------------------------- options
+
+
+def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
+    """The launcher's options (``--opt value`` and ``--opt=value``)."""
+    p = OneLineParser(prog=prog, description="Run the ROS 2 node graph, print the indices "
+                      "of each controller segment and the bag's path.",
+                      epilog="Exit codes: " + ", ".join(f"{c} {n}" for n, c in
+                                                        EXIT_CODES.items()))
+    p.add_argument("--controller", choices=CONTROLLERS, default="pd_pf",
+                   help="controller in charge at the start (default pd_pf)")
+    p.add_argument("--switch-to", choices=CONTROLLERS, dest="switch_to",
+                   help="controller to hand over to (default: the other one)")
+    p.add_argument("--switch-at", dest="switch_at",
+                   type=number(0.0, SPECS["run.duration"].hi or math.inf,
+                               "a simulated time (s)"),
+                   help="simulated time of the hand-over (default: half the duration)")
+    p.add_argument("--no-switch", action="store_true", dest="no_switch",
+                   help="keep the first controller all along")
+    p.add_argument("--mode", choices=MODES, default="lockstep", help="graph mode")
+    p.add_argument("--rt-priority", dest="rt_priority", type=rt_priority, metavar="N",
+                   help=f"SCHED_FIFO priority of the control path (the sim's, the "
+                   f"controllers' and the trajectory generator's main and Fast DDS "
+                   f"threads; the other nodes' Fast DDS threads); default "
+                   f"{REALTIME_PRIORITY} in realtime mode, 0 (normal scheduling) in "
+                   f"lockstep; needs CAP_SYS_NICE or an rtprio limit, else a warning")
+    p.add_argument("--duration", type=_duration, default=6.0,
+                   help="simulated duration in s (default 6); 0 = until Ctrl-C")
+    p.add_argument("--ground-scale", dest="ground_scale", type=param_value("ground.scale"),
+                   help="factor on the four ground parameters (1.0 = 100 %%)")
+    p.add_argument("--t-max", dest="t_max", type=param_value("actuator.t_max"),
+                   help="actuator saturation T_max in N m (.inf = ideal actuators)")
+    p.add_argument("--control-rate", dest="control_rate", type=control_rate, metavar="HZ",
+                   help="control rate in Hz (sets sim.control_period = 1/HZ; default "
+                   f"{GRAPH_RATE_HZ:g} unless --params or --set sim.control_period says "
+                   "otherwise)")
+    p.add_argument("--params", help="ROS 2 params file (default: the shipped base experiment)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override any parameter by its dotted name (repeatable)")
+    p.add_argument("--bag", help="bag directory (default bags/<YYYYmmdd-HHMMSS>); node logs "
+                   "go to BAG_logs")
+    p.add_argument("--sim-time", action="store_true", dest="sim_time",
+                   help="run the other nodes with use_sim_time:=true (~10 %% slower)")
+    p.add_argument("--markers", action="store_true",
+                   help="also run the markers node (/hexapod/markers for Foxglove)")
+    p.add_argument("--foxglove", nargs="?", const=8765, default=None, metavar="PORT",
+                   type=port, help="serve the graph's topics live to Foxglove on "
+                   "ws://localhost:PORT (default 8765); implies --markers; layout: "
+                   "docs/foxglove/hexapod_layout.json")
+    return p
+
+
+#: The graph's default control rate (Hz). The params file's 10 kHz (the paper experiments'
+#: rate) runs well below real time over topics; at 2 kHz the base case is dt-converged for
+#: both controllers (`hexapod converge --control-rate 2000`), harder ground needs 5-10 kHz
+#: (E6 in report/README.md).
+GRAPH_RATE_HZ = 2000.0
+
+
+def convergence_note(p: HexapodParams) -> str:
+    """What E6 says about the numbers of a run at ``p``'s control rate."""
+    rate = 1.0 / p.sim.control_period
+    if rate >= 10000.0 - 1e-6:
+        return "the rate of the paper experiments: dt-converged over E6's whole range"
+    if rate >= 2000.0 - 1e-6 and p.ground.scale <= 1.0:
+        return ("dt-converged on the base ground and softer (E6); harder ground needs "
+                "5-10 kHz")
+    return ("NOT dt-converged in general at this rate (E6): PD-P&F's numbers depend on the "
+            "physics step; check with `hexapod converge --control-rate HZ`")
+
+
+#: The control path's SCHED_FIFO priority in realtime mode (hexapod_common/runtime/rt_sched.py):
+#: low among real-time priorities (the kernel's threaded interrupts run at 50).
+REALTIME_PRIORITY = 20
+
+
+def rt_priority(text: str) -> int:
+    """A SCHED_FIFO priority, 0..98 (0 = normal scheduling)."""
+    value = number(0.0, MAX_PRIORITY, "a SCHED_FIFO priority")(text)
+    if value != int(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a SCHED_FIFO priority (an integer "
+                                         f"in [0, {MAX_PRIORITY}])")
+    return int(value)
+
+
+def port(text: str) -> int:
+    """A TCP port number, 0..65535 (0 = any free one)."""
+    if not text.isdigit() or int(text) > 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port number in [0, 65535]")
+    return int(text)
+
+
+def _duration(text: str) -> float:
+    """0 (until Ctrl-C) or a valid run.duration."""
+    try:
+        if float(text) == 0.0:
+            return 0.0
+    except ValueError:
+        pass
+    return float(param_value("run.duration")(text))
+
+
+def settings(args: argparse.Namespace) -> tuple[HexapodParams, dict[str, Any]]:
+    """The validated parameters of the run and the node parameters from the params file.
+
+    Raises ParameterError / ParamsFileError (one line, named key) exactly as the CLI does.
+    """
+    overrides = overrides_from_args(args)
+    overrides["run.controller"] = args.controller
+    overrides["sim.mode"] = args.mode
+    if args.duration > 0:
+        overrides["run.duration"] = args.duration
+    if args.params is None and "sim.control_period" not in overrides:
+        overrides["sim.control_period"] = 1.0 / GRAPH_RATE_HZ
+    path = args.params or default_params_path()
+    p = load_params(path, **overrides)
+    node_params = {k: v for k, v in read_params_file(path).items() if k not in SPECS}
+    if args.switch_at is not None and args.duration > 0 and args.switch_at > args.duration:
+        raise LaunchError(f"argument --switch-at: {args.switch_at:g} s is after the end of "
+                          f"the run (--duration {args.duration:g} s)")
+    return p, node_params
+
+
+def write_params_file(path: Path, p: HexapodParams, node_params: dict[str, Any]) -> None:
+    """The nodes' params file: every model parameter as validated, plus the file's node
+    parameters (all in ``/**``); floats stay floats (``1.0``, ``.inf``)."""
+    tree: dict[str, Any] = {}
+    for name, value in p.to_flat().items():
+        group, _, key = name.partition(".")
+        tree.setdefault(group, {})[key] = value
+    tree.update(node_params)
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": tree}}, sort_keys=False))
+
+
+# --------------------------------------------------------------------------- the run
+
+
+class Launcher:
+    """One run of the graph from validated settings."""
+
+    def __init__(self, args: argparse.Namespace, p: HexapodParams,
+                 node_params: dict[str, Any]) -> None:
+        self.args = args
+        self.p = p
+        root = Path.cwd()
+        bag = Path(args.bag) if args.bag else root / "bags" / time.strftime("%Y%m%d-%H%M%S")
+        self.bag = bag.resolve()
+        if self.bag.exists():
+            raise LaunchError(f"bag directory {self.bag} already exists")
+        self.logs = Path(f"{self.bag}_logs")
+        self.run_dir = Path(tempfile.mkdtemp(prefix="hexapod_run_"))  # 0700
+        self.params_file = self.run_dir / "params.yaml"
+        write_params_file(self.params_file, p, node_params)
+        self.summary_file = self.run_dir / "sim_summary.json"
+        self.graph: GraphProcesses | None = None
+        self.stop_signal: int | None = None
+        self.outcome = Outcome()
+
+    # ------------------------------------------------------------------ start
+    def sim_overrides(self) -> list[str]:
+        """The sim's own parameters: stop, scripted switch, summary file."""
+        a = self.args
+        extra = [f"summary_path:={self.summary_file}"]
+        if a.markers or a.foxglove is not None:
+            # tick 0 waits for the markers node too, so the markers cover the run from t = 0
+            extra.append("wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller,"
+                         "metrics,markers")
+        switch_to = a.switch_to or ("pd_p" if a.controller == "pd_pf" else "pd_pf")
+        if a.duration > 0:
+            extra.append("stop_at_end:=true")
+            if not a.no_switch:
+                at = a.switch_at if a.switch_at is not None else a.duration / 2
+                extra += [f"switch_at:={float(at)!r}", f"switch_to:={switch_to}"]
+        elif not a.no_switch and a.switch_at is not None:
+            extra += [f"switch_at:={float(a.switch_at)!r}", f"switch_to:={switch_to}"]
+        return extra
+
+    def describe(self) -> str:
+        """One line: what this run does."""
+        a = self.args
+        d = f"{a.mode} mode, {a.controller} in charge"
+        if not a.no_switch and (a.duration > 0 or a.switch_at is not None):
+            switch_to = a.switch_to or ("pd_p" if a.controller == "pd_pf" else "pd_pf")
+            at = a.switch_at if a.switch_at is not None else a.duration / 2
+            d += f", {switch_to} from t = {at:g} s"
+        return d + (f", {a.duration:g} s" if a.duration > 0 else ", until Ctrl-C")
+
+    def scheduling(self) -> int:
+        """The control path's SCHED_FIFO priority for this run (0: normal scheduling), and
+        one line saying so (or why not)."""
+        a = self.args
+        priority = a.rt_priority
+        if priority is None:
+            priority = REALTIME_PRIORITY if self.p.sim.mode == "realtime" else 0
+        if priority == 0:
+            return 0
+        if not realtime_permitted(priority):
+            print(f"run_graph: warning: SCHED_FIFO priority {priority} is not permitted here "
+                  f"({HOW_TO_PERMIT}): the control path runs with normal scheduling and "
+                  f"realtime mode may miss deadlines", file=sys.stderr, flush=True)
+            return 0
+        print(f"run_graph: SCHED_FIFO priority {priority} for the control path "
+              f"({', '.join(RT_NODES)}: main and Fast DDS threads) and the other nodes' Fast "
+              f"DDS threads", flush=True)
+        return priority
+
+    def start(self) -> None:
+        """Start the nodes (the sim last: it waits for the others' endpoints)."""
+        self.bag.parent.mkdir(parents=True, exist_ok=True)
+        self.logs.mkdir(parents=True, exist_ok=True)
+        self.graph = g = GraphProcesses(self.logs, params=str(self.params_file),
+                                        use_sim_time=self.args.sim_time,
+                                        rt_priority=self.scheduling())
+        print(f"run_graph: ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}: "
+              f"{self.describe()} (node logs in {self.logs})", flush=True)
+        rate = 1.0 / self.p.sim.control_period
+        print(f"run_graph: control at {rate / 1000:g} kHz, physics step "
+              f"{self.p.sim.dt:g} s: {convergence_note(self.p)}", flush=True)
+        g.start("metrics", f"bag_path:={self.bag}")
+        g.start("trajectory_generator")
+        g.start("pd_p_controller")
+        g.start("pd_pf_controller")
+        if self.args.markers or self.args.foxglove is not None:
+            g.start("markers")
+        if self.args.foxglove is not None:
+            g.start("foxglove_bridge", f"port:={self.args.foxglove}")
+            print(f"run_graph: Foxglove live view on ws://localhost:{self.args.foxglove} "
+                  "(layout: docs/foxglove/hexapod_layout.json)", flush=True)
+        g.start("hexapod_sim", *self.sim_overrides())
+        (self.logs / "pids.json").write_text(json.dumps(
+            {n: proc.pid for n, proc in g.procs.items()} | {"launcher": os.getpid()}))
+
+    # ------------------------------------------------------------------ watch
+    def watch(self) -> None:
+        """Until the sim ends or a stop signal comes: report every node that exits."""
+        g = self.graph
+        assert g is not None
+        seen: set[str] = set()
+        while self.stop_signal is None:
+            sim = g.poll("hexapod_sim")
+            for name in list(g.procs):
+                code = g.poll(name)
+                if code is None or name in seen or name == "hexapod_sim":
+                    continue
+                seen.add(name)
+                self._node_ended(name, code, during_run=True)
+            if "metrics" in seen and sim is None:
+                print("run_graph: the recorder is gone: stopping the graph", file=sys.stderr)
+                break
+            if sim is not None:
+                break
+            time.sleep(0.1)
+
+    def _node_ended(self, name: str, code: int | None, during_run: bool) -> None:
+        self.outcome.codes[name] = code
+        how = _how(code)
+        log = self.logs / f"{name}.log"
+        if name == "metrics":
+            if self._disk_full(code):
+                self.outcome.add("disk full", f"the recorder ran out of disk space ({how}; "
+                                 f"log: {log})")
+            elif during_run or code != 0:
+                what = (" (its bag could not be written to the end)"
+                        if code == RECORDER_WRITE_FAILED_EXIT else "")
+                self.outcome.add("recorder failed", f"the recorder (metrics) {how}{what} "
+                                 f"{'during the run' if during_run else 'at the end'} "
+                                 f"(log: {log})")
+        elif during_run or code not in (0, None):
+            self.outcome.add("node died", f"{name} {how} during the run (log: {log})")
+        if during_run:
+            print(f"run_graph: {name} {how} during the run (log: {log})", file=sys.stderr,
+                  flush=True)
+
+    def _disk_full(self, code: int | None) -> bool:
+        """Did the recorder stop because the bag's disk is full?  Its exit code, the words
+        of its log, or (a log on the same full disk may say nothing) the free space."""
+        if code in (0, None):
+            return False
+        try:
+            if shutil.disk_usage(self.bag.parent).free < DISK_FULL_BYTES:
+                return True
+            text = (self.logs / "metrics.log").read_text(errors="replace")
+        except OSError:
+            return False
+        return any(m in text for m in DISK_FULL_MARKERS)
+
+    # ------------------------------------------------------------------ stop
+    def stop(self) -> None:
+        """Stop every node (sim first, recorder last) and collect the exit codes."""
+        g = self.graph
+        if g is None:
+            return
+        for name in STOP_ORDER:
+            if name not in g.procs:
+                continue
+            was_running = g.procs[name].poll() is None
+            code = g.stop(name, timeout=30.0 if name == "metrics" else 10.0)
+            if name in self.outcome.codes:  # reported when it ended during the run
+                continue
+            if name == "hexapod_sim":
+                self._sim_ended(code)
+            elif was_running and code in (0, -signal.SIGINT, -signal.SIGTERM):
+                self.outcome.codes[name] = code
+            else:
+                self._node_ended(name, code, during_run=not was_running)
+        g.stop_all()
+
+    def _sim_ended(self, code: int | None) -> None:
+        self.outcome.codes["hexapod_sim"] = code
+        log = self.logs / "hexapod_sim.log"
+        if code == 1 and "diverg" in log.read_text(errors="replace").lower():
+            self.outcome.add("diverged", f"the model diverged: hexapod_sim stopped (log: {log})")
+        elif code not in (0, None):
+            self.outcome.add("node died", f"hexapod_sim {_how(code)} (log: {log})")
+
+    # ------------------------------------------------------------------ report
+    def sim_summary(self) -> dict[str, Any] | None:
+        """The sim's summary (None if it wrote none)."""
+        try:
+            return json.loads(self.summary_file.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def report(self) -> list[str]:
+        """Lines: the sim's figures, the indices (labelled), the causes, the bag."""
+        lines = []
+        summary = self.sim_summary()
+        if summary is not None:
+            lines.append(
+                f"  sim: stopped at tick {summary['tick']} (t = "
+                f"{summary['tick'] * summary['control_period']:.3f} s): {summary['missed']} "
+                f"missed, {summary['late']} late, {summary['fallback_episodes']} fallback "
+                f"episodes, {len(summary['switches'])} switches")
+            if summary["fallback_episodes"]:
+                ranges = summary["fallback_ticks"]
+                self.outcome.add("fallback", f"{summary['fallback_episodes']} fallback "
+                                 f"episode(s): joint damping from tick "
+                                 f"{ranges[0][0] if ranges else '?'} (the controller in "
+                                 f"charge went silent)")
+            if summary["missed"] or summary["fallback_episodes"]:
+                lines += self.controller_waits()
+        lines += indices_lines(self.bag / "indices.json")
+        return lines
+
+    def controller_waits(self) -> list[str]:
+        """Lines: what each controller's states waited for (its end summary, core/waits.py),
+        the controllers' side of missed ticks."""
+        lines = []
+        g = self.graph
+        for name in (f"{c}_controller" for c in CONTROLLERS):
+            try:
+                waits = parse_waits(g.log(name)) if g is not None else None
+            except OSError:  # not started
+                waits = None
+            cause = waits.cause() if waits is not None else ""
+            if cause:
+                lines.append(f"  {name}: {cause}")
+        return lines
+
+    def cleanup(self) -> None:
+        """Remove the private run directory."""
+        shutil.rmtree(self.run_dir, ignore_errors=True)
+
+
+def _how(code: int | None) -> str:
+    if code is None:
+        return "did not stop"
+    if code < 0:
+        try:
+            return f"was killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"was killed by signal {-code}"
+    return f"exited with code {code}"
+
+
+def indices_lines(path: Path) -> list[str]:
+    """The table of indices per controller segment from ``indices.json``, each cycle under
+    the metrics node's label (``hexapod_common.core.labels``: ``fallback``, ``held`` or
+    ``mixed(...)`` when the controller in charge did not command all its torques)."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return [f"run_graph: no indices.json in {path.parent} (see the metrics log)"]
+    names = doc["index_names"]
+    out = ["indices per controller segment (last full gait cycle of each):",
+           f"  {'controller':<24} {'segment [s]':<16} {'cycle [s]':<12}"
+           + "".join(f"{n:>11}" for n in names)]
+    for s in doc["segments"]:
+        c = s["last_full_cycle"]
+        seg = f"[{s['t_start']:g}, {s['t_end']:g}]"
+        if c is None:
+            out.append(f"  {s['controller']:<24} {seg:<16} no full gait cycle")
+            continue
+        label = c.get("label", s["controller"])
+        row = "".join(f"{c['indices'][n]:>11.4g}" for n in names)
+        out.append(f"  {label:<24} {seg:<16} {'[%g, %g]' % (c['t_a'], c['t_b']):<12}{row}")
+    return out
+
+
+def run(argv: Sequence[str] | None = None, prog: str = "run_graph") -> int:
+    """Parse, validate, launch, watch, stop, report; the exit code (:data:`EXIT_CODES`)."""
+    args = build_parser(prog).parse_args(argv)
+    try:
+        p, node_params = settings(args)
+        launcher = Launcher(args, p, node_params)
+    except HexapodError as err:
+        print(f"{prog}: error: {err}", file=sys.stderr)
+        return EXIT_CODES["bad settings"]
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("RMW_FASTRTPS_PUBLICATION_MODE", "SYNCHRONOUS")
+
+    def on_signal(signum: int, frame: Any) -> None:
+        if launcher.stop_signal is None:
+            launcher.stop_signal = signum
+            print(f"{prog}: {signal.Signals(signum).name}: stopping the graph",
+                  file=sys.stderr, flush=True)
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        try:
+            launcher.start()
+        except OSError as err:  # the bag's or the logs' directory cannot be made
+            print(f"{prog}: error: cannot start the graph: {err}", file=sys.stderr)
+            return EXIT_CODES["bad settings"]
+        launcher.watch()
+        launcher.stop()
+        if launcher.stop_signal is not None and args.duration > 0:
+            name = signal.Signals(launcher.stop_signal).name
+            launcher.outcome.add("interrupted", f"stopped by {name} before the end of the run")
+        for line in launcher.report():
+            print(line)
+        for cause, line in launcher.outcome.causes.items():
+            print(f"{prog}: {cause} (exit {EXIT_CODES[cause]}): {line}", file=sys.stderr)
+        print(f"bag: {launcher.bag}", flush=True)
+        return launcher.outcome.exit_code()
+    finally:
+        if launcher.graph is not None and launcher.graph.procs:
+            launcher.graph.stop_all(order=STOP_ORDER)
+        for s, h in old.items():
+            signal.signal(s, h)
+        launcher.cleanup()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point (``python -m hexapod_bringup.graph_launcher``)."""
+    return run(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,206 @@
+"""Figures in the style of the paper (matplotlib, written as PNG files).
+
+Time plots (Figs. 4-7, 16-17): one curve per controller. Sweep plots (Figs. 8-15): one index
+(or a pair, as the paper groups them) against the ground percentage on a log axis.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .core.experiments import SweepResult
+from hexapod_metrics.core.indices import INDEX_UNITS
+
+LABELS = {"pd_p": "PD-P", "pd_pf": "PD-P&F"}
+STYLES = {"pd_p": dict(color="tab:blue"), "pd_pf": dict(color="tab:red")}
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def label(controller: str) -> str:
+    """Display name of a controller segment ('pd_p' -> 'PD-P'; others unchanged)."""
+    return LABELS.get(controller, controller)
+
+
+#: Time signals: key -> (title, y label). Values come from :func:`time_signals`.
+TIME_SIGNALS = {
+    "dxH": (r"$|\Delta_{1xH}|$", "m"),
+    "dyH": (r"$|\Delta_{1yH}|$", "m"),
+    "Tm11": (r"$T_{m11}$", "N m"),
+    "Tm12": (r"$T_{m12}$", "N m"),
+}
+
+
+def time_signals(obs: np.ndarray, hip_ref: np.ndarray) -> dict[str, np.ndarray]:
+    """Leg 1's hip errors and joint torques from samples (N, 9, 6, 2) and refs (N, 6, 2)."""
+    from hexapod_common.core.layout import O_HP, O_TQ
+
+    return {"dxH": np.abs(hip_ref[:, 0, 0] - obs[:, O_HP, 0, 0]),
+            "dyH": np.abs(hip_ref[:, 0, 1] - obs[:, O_HP, 0, 1]),
+            "Tm11": obs[:, O_TQ, 0, 0], "Tm12": obs[:, O_TQ, 0, 1]}
+
+
+def time_plot(series: Mapping[str, tuple[np.ndarray, np.ndarray]], key: str, path: Path,
+              title: str = "", fine: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None
+              ) -> Path:
+    """One signal vs time, a curve per controller: series[controller] = (t, value);
+    ``fine`` (same keys) the same runs at dt/4, drawn dashed on top."""
+    plt = _pyplot()
+    name, unit = TIME_SIGNALS[key]
+    fig, ax = plt.subplots(figsize=(6.4, 3.4), dpi=110)
+    for c, (t, y) in series.items():
+        ax.plot(t, y, lw=0.9, label=label(c), **STYLES.get(c, {}))
+    for c, (t, y) in (fine or {}).items():
+        ax.plot(t, y, lw=0.7, ls="--", color="k" if c not in STYLES else STYLES[c]["color"],
+                alpha=0.7, label=f"{label(c)} at dt/4")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel(f"{name} ({unit})")
+    ax.set_title(title or name)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def _checked_curve(ax, x: np.ndarray, res: SweepResult, c: str, name: str) -> None:  # type: ignore[no-untyped-def]
+    """One controller's index over a sweep: line and filled markers where converged, hollow
+    markers where not, and the band over dt, dt/2, dt/4 shaded when the sweep was checked."""
+    color = STYLES.get(c, {}).get("color", "k")
+    y = res.index(c, name)
+    ok = res.converged(c, name)
+    ax.plot(x, y, lw=1.2, color=color, label=label(c))
+    ax.plot(x[ok], y[ok], "o", ms=3.5, color=color)
+    if res.checked:
+        lo, hi = res.band(c, name)
+        ax.fill_between(x, lo, hi, color=color, alpha=0.18, lw=0)
+        bad = ~ok & ~np.isnan(y)
+        if bad.any():
+            ax.plot(x[bad], y[bad], "o", ms=6, mfc="white", mec=color,
+                    label=f"{label(c)} not dt-converged")
+    div = np.isnan(y)
+    if div.any():
+        ax.plot(x[div], np.zeros(div.sum()), "x", color=color, label=f"{label(c)} diverged")
+
+
+def sweep_plot(res: SweepResult, names: Sequence[str], path: Path, title: str,
+               x_scale: float = 100.0, x_label: str = "% of base ground (K_x, K_y, B_x, B_y)",
+               log_x: bool = True) -> Path:
+    """Indices ``names`` vs the swept value (times ``x_scale``), both controllers; with a
+    checked sweep, the dt-convergence band shaded and unconverged points hollow."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(names), figsize=(5.2 * len(names), 3.6), dpi=110,
+                             squeeze=False)
+    x = res.values * x_scale
+    for ax, name in zip(axes[0], names):
+        for c in res.outcomes:
+            _checked_curve(ax, x, res, c, name)
+        if log_x:
+            ax.set_xscale("log")
+        shown = "P_L (= F_L)" if name == "F_L" else name
+        ax.set_ylabel(f"{shown} ({INDEX_UNITS[name]})")
+        ax.set_xlabel(x_label)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(title + ("" if res.checked else " (not checked for dt convergence)"))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def rate_plot(sweeps: Mapping[float, SweepResult], name: str, path: Path, title: str) -> Path:
+    """E6: one index against the control rate (Hz, log axis), one panel per ground.
+
+    ``sweeps[rate]`` are checked ground sweeps that share their ground values.
+    """
+    plt = _pyplot()
+    rates = np.array(sorted(sweeps))
+    values = next(iter(sweeps.values())).values
+    cols = 3
+    rows = -(-len(values) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols, 2.8 * rows), dpi=100,
+                             squeeze=False, sharex=True)
+    for k, v in enumerate(values):
+        ax = axes[k // cols][k % cols]
+        for c in next(iter(sweeps.values())).outcomes:
+            color = STYLES.get(c, {}).get("color", "k")
+            y = np.array([sweeps[r].index(c, name)[k] for r in rates])
+            ok = np.array([sweeps[r].converged(c, name)[k] for r in rates])
+            lo = np.array([sweeps[r].band(c, name)[0][k] for r in rates])
+            hi = np.array([sweeps[r].band(c, name)[1][k] for r in rates])
+            ax.plot(rates, y, lw=1.1, color=color, label=label(c))
+            ax.fill_between(rates, lo, hi, color=color, alpha=0.18, lw=0)
+            ax.plot(rates[ok], y[ok], "o", ms=3.5, color=color)
+            bad = ~ok & ~np.isnan(y)
+            ax.plot(rates[bad], y[bad], "o", ms=6, mfc="white", mec=color)
+        ax.set_xscale("log")
+        ax.set_title(f"ground {100 * v:.3g} %", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        if k % cols == 0:
+            ax.set_ylabel(f"{name} ({INDEX_UNITS[name]})")
+        if k // cols == rows - 1:
+            ax.set_xlabel("control rate (Hz)")
+    for k in range(len(values), rows * cols):
+        axes[k // cols][k % cols].axis("off")
+    axes[0][0].legend(fontsize=7, title="hollow: not dt-converged", title_fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+#: Cell codes of :func:`advantage_map`.
+MAP_CODES = {"pd_pf better": 2, "undecided": 1, "pd_p better": 0}
+
+
+def advantage_map(rates: Sequence[float], percents: Sequence[float],
+                  cells: Mapping[tuple[float, float], str],
+                  converged: Mapping[tuple[float, float], bool], path: Path,
+                  title: str) -> Path:
+    """E6: a (control rate, ground) map: where PD-P&F's tracking errors are all below
+    PD-P's (decided), where PD-P's are (at least one, decided), where it is undecided; cells
+    with an unconverged number are hatched."""
+    plt = _pyplot()
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    grid = np.array([[MAP_CODES[cells[(r, g)]] for g in percents] for r in rates], float)
+    fig, ax = plt.subplots(figsize=(1.0 + 0.7 * len(percents), 1.2 + 0.55 * len(rates)),
+                           dpi=110)
+    cmap = ListedColormap(["tab:blue", "lightgrey", "tab:red"])
+    ax.imshow(grid, cmap=cmap, vmin=0, vmax=2, aspect="auto", origin="lower")
+    for i, r in enumerate(rates):
+        for j, g in enumerate(percents):
+            if not converged[(r, g)]:
+                ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="///",
+                                           lw=0, color="k"))
+    ax.set_xticks(range(len(percents)), [f"{g:g}" for g in percents])
+    ax.set_yticks(range(len(rates)), [f"{r / 1000:g}" for r in rates])
+    ax.set_xlabel("ground (% of base)")
+    ax.set_ylabel("control rate (kHz)")
+    ax.set_title(title, fontsize=10)
+    ax.legend(handles=[Patch(color="tab:red", label="PD-P&F below PD-P (all 4 errors)"),
+                       Patch(color="tab:blue", label="PD-P below on some error"),
+                       Patch(color="lightgrey", label="undecided (within bands)"),
+                       Patch(fill=False, hatch="///", label="a deciding number not dt-converged")],
+              fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+__all__ = ["LABELS", "MAP_CODES", "TIME_SIGNALS", "advantage_map", "label", "rate_plot",
+           "sweep_plot", "time_plot", "time_signals"]

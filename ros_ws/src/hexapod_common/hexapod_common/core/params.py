@@ -1,0 +1,601 @@
+"""Parameters: one frozen dataclass per group, one table of ranges, one validator, one loader.
+
+The YAML file is a ROS 2 params file (``/**: ros__parameters: <group>: <name>: value``);
+nested keys become dotted ROS parameter names (``ground.k_y``). The same table
+(:data:`SPECS`) gives the ROS nodes their parameter descriptors, so the nodes, the
+engine and the CLI accept and reject exactly the same values.
+
+Units are SI throughout (m, kg, s, N, N·m). Defaults are the paper's base experiment
+(model.md, "Experiments", E1).
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import re
+from dataclasses import dataclass, field, fields, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from .errors import ParameterError, ParamsFileError
+from .kinematics import N_LEGS
+
+CONTROLLERS = ("pd_p", "pd_pf")
+MODES = ("lockstep", "realtime")
+INTEGRATORS = ("implicit_ground_damping", "semi_implicit_euler")
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Type, range and meaning of one parameter."""
+
+    kind: type
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: tuple[str, ...] = ()
+    allow_inf: bool = False
+    default: Any = None  # node parameters only (model parameters: the params file)
+
+    def allowed(self) -> str:
+        """Human text of the allowed values, used in error messages and descriptors."""
+        if self.kind is bool:
+            return "true or false"
+        if self.choices:
+            return "one of " + ", ".join(c or "''" for c in self.choices)
+        if self.lo is None and self.hi is None:
+            return f"any {self.kind.__name__}"
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        left = "(" if self.lo_open or self.lo is None else "["
+        right = ")" if (self.hi_open or self.hi is None) and not self.allow_inf else "]"
+        if self.allow_inf:
+            hi = "inf"
+        return f"{self.kind.__name__} in {left}{lo}, {hi}{right}"
+
+
+def _f(desc: str, lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+       hi_open: bool = False, allow_inf: bool = False) -> Any:
+    return field(metadata={"spec": Spec(float, desc, lo, hi, lo_open, hi_open, (), allow_inf)})
+
+
+def _i(desc: str, lo: int, hi: int) -> Any:
+    return field(metadata={"spec": Spec(int, desc, lo, hi)})
+
+
+def _s(desc: str, choices: tuple[str, ...]) -> Any:
+    return field(metadata={"spec": Spec(str, desc, choices=choices)})
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """Geometry and masses (model.md "Masses": point masses at hip, knee and foot)."""
+
+    leg_length_1: float = _f("thigh length L_i1 (m)", 0.0, 100.0, lo_open=True)
+    leg_length_2: float = _f("shank length L_i2 (m)", 0.0, 100.0, lo_open=True)
+    mass_1: float = _f("thigh mass M_i1, a point mass at the knee (kg)", 0.0, 1e4, lo_open=True)
+    mass_2: float = _f("shank mass M_i2, a point mass at the foot (kg)", 0.0, 1e4, lo_open=True)
+    body_mass: float = _f("body mass M_b, split into 6 hip point masses (kg)", 0.0, 1e5,
+                          lo_open=True)
+    stroke_pitch: float = _f("stroke pitch S_P between leg pairs (m)", 0.0, 100.0)
+    foot_offset: float = _f("foot trajectory offset O_i (m)", -100.0, 100.0)
+
+
+@dataclass(frozen=True)
+class SpringDashpot:
+    """Linear spring-dashpots along x and y (the body's and the ground's; model.md "Body
+    compliance", "Ground contact"): F = -K d - B v per axis."""
+
+    k_x: float = _f("stiffness K_x (N/m)", 0.0, 1e12)
+    k_y: float = _f("stiffness K_y (N/m)", 0.0, 1e12)
+    b_x: float = _f("damping B_x (N s/m)", 0.0, 1e12)
+    b_y: float = _f("damping B_y (N s/m)", 0.0, 1e12)
+
+
+@dataclass(frozen=True)
+class BodyParams(SpringDashpot):
+    """Spring-dashpots between body segments (model.md "Body compliance")."""
+
+
+@dataclass(frozen=True)
+class GroundParams(SpringDashpot):
+    """Foot-ground spring-dashpot (model.md "Ground contact") at 100 %; effective values:
+    base x scale."""
+
+    scale: float = _f("factor on all four ground parameters (1.0 = 100 %, the sweep variable)",
+                      0.0, 1e6, lo_open=True)
+    friction_mu: float = _f("Coulomb limit |F_x| <= mu F_y; 0 disables it (paper: none)",
+                            0.0, 100.0)
+
+
+@dataclass(frozen=True)
+class GaitParams:
+    """Wave gait and trajectory (paper eqs. 1-4)."""
+
+    duty_factor: float = _f("duty factor beta", 0.0, 1.0, lo_open=True, hi_open=True)
+    step_length: float = _f("step length L_S (m)", 0.0, 100.0, lo_open=True)
+    body_height: float = _f("body (hip) height H_B (m)", 0.0, 100.0, lo_open=True)
+    foot_clearance: float = _f("maximum foot clearance F_C (m)", 0.0, 100.0)
+    velocity: float = _f("forward body velocity V_F (m/s)", 0.0, 100.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class ActuatorParams:
+    """Joint actuators (paper eq. 6)."""
+
+    t_max: float = _f("torque saturation T_max (N m); .inf = ideal actuator", 0.0, None,
+                      lo_open=True, allow_inf=True)
+
+
+@dataclass(frozen=True)
+class GainParams:
+    """G_c1 = Kp + Kd s per joint and the inner gain K_f (paper eq. 7, Table I)."""
+
+    kp1: float = _f("hip joint proportional gain Kp_1 (N m/rad)", 0.0, 1e9)
+    kd1: float = _f("hip joint derivative gain Kd_1 (N m s/rad)", 0.0, 1e9)
+    kp2: float = _f("knee joint proportional gain Kp_2 (N m/rad)", 0.0, 1e9)
+    kd2: float = _f("knee joint derivative gain Kd_2 (N m s/rad)", 0.0, 1e9)
+    kf: float = _f("inner loop gain K_f (G_c2)", 0.0, 100.0)
+
+    def as_tuple(self) -> tuple[float, float, float, float, float]:
+        """(Kp1, Kd1, Kp2, Kd2, K_f)."""
+        return (self.kp1, self.kd1, self.kp2, self.kd2, self.kf)
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Integration, control rate and graph timing."""
+
+    dt: float = _f("physics step (s)", 0.0, 0.01, lo_open=True)
+    integrator: str = _s("semi_implicit_euler as model.md; implicit_ground_damping (default) "
+                         "also takes the ground dampers at the end-of-step velocity", INTEGRATORS)
+    control_period: float = _f("control period, a multiple of dt (s)", 0.0, 0.1, lo_open=True)
+    mode: str = _s("graph mode", MODES)
+    lockstep_timeout: float = _f("lockstep: wall time to wait for a command before a missed "
+                                 "tick (s)", 0.0, 60.0, lo_open=True)
+    hold_time: float = _f("controller silent this long (sim s): hold the last torque, then "
+                          "fall back to joint damping", 0.0, 10.0, lo_open=True)
+    fallback_damping: float = _f("joint damping of the safe fallback (N m s/rad)", 0.0, 1e6)
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """What one run does."""
+
+    controller: str = _s("controller in charge", CONTROLLERS)
+    duration: float = _f("simulated duration (s)", 0.0, 1e6, lo_open=True)
+    eval_cycles: int = _i("gait cycles at the end of the run that the indices cover", 1, 1000)
+
+
+_GROUP_TYPES: dict[str, type] = {
+    "robot": RobotParams, "body": BodyParams, "ground": GroundParams, "gait": GaitParams,
+    "actuator": ActuatorParams, "pd_p": GainParams, "pd_pf": GainParams, "sim": SimParams,
+    "run": RunParams,
+}
+
+
+@dataclass(frozen=True)
+class HexapodParams:
+    """All parameters; ``HexapodParams()`` has no defaults of its own: use :func:`load_params`."""
+
+    robot: RobotParams
+    body: BodyParams
+    ground: GroundParams
+    gait: GaitParams
+    actuator: ActuatorParams
+    pd_p: GainParams
+    pd_pf: GainParams
+    sim: SimParams
+    run: RunParams
+
+    # -- derived quantities --------------------------------------------------
+    @property
+    def cycle_time(self) -> float:
+        """T = L_S / V_F (s)."""
+        return self.gait.step_length / self.gait.velocity
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control period."""
+        return int(round(self.sim.control_period / self.sim.dt))
+
+    def gains(self, controller: str) -> GainParams:
+        """Gains of ``controller`` ('pd_p' or 'pd_pf')."""
+        check_controller(controller)
+        return self.pd_p if controller == "pd_p" else self.pd_pf
+
+    def with_values(self, **dotted: Any) -> "HexapodParams":
+        """A validated copy with some parameters changed:
+        ``p.with_values(**{'ground.scale': 2})``."""
+        flat = self.to_flat()
+        for name, value in dotted.items():
+            if name not in flat:
+                raise unknown_parameter(name, value)
+            flat[name] = value
+        return from_flat(flat)
+
+    def to_flat(self) -> dict[str, Any]:
+        """Dotted name -> value, the ROS parameter view."""
+        out: dict[str, Any] = {}
+        for group in fields(self):
+            for f in fields(_GROUP_TYPES[group.name]):
+                out[f"{group.name}.{f.name}"] = getattr(getattr(self, group.name), f.name)
+        return out
+
+
+def specs() -> dict[str, Spec]:
+    """Dotted parameter name -> :class:`Spec`, for every parameter."""
+    return {f"{g}.{f.name}": f.metadata["spec"] for g, t in _GROUP_TYPES.items()
+            for f in fields(t)}
+
+
+SPECS: dict[str, Spec] = specs()
+
+
+def check_value(name: str, value: Any) -> Any:
+    """Check one parameter against its spec; return it converted (int -> float where due)."""
+    spec = SPECS.get(name)
+    if spec is None:
+        raise unknown_parameter(name, value)
+    return check_spec(name, spec, value)
+
+
+def check_spec(name: str, spec: Spec, value: Any) -> Any:
+    """``value`` checked against ``spec`` (ParameterError naming ``name``), converted."""
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(name, value, spec.allowed())
+        return value
+    if spec.kind is str:
+        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
+            raise ParameterError(name, value, spec.allowed())
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.kind is int:
+        if isinstance(value, float) and not value.is_integer():
+            raise ParameterError(name, value, spec.allowed())
+        value = int(value)
+    else:
+        value = float(value)
+    if math.isnan(value) or (math.isinf(value) and not (spec.allow_inf and value > 0)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.lo is not None and (value < spec.lo or (spec.lo_open and value == spec.lo)):
+        raise ParameterError(name, value, spec.allowed())
+    if spec.hi is not None and (value > spec.hi or (spec.hi_open and value == spec.hi)):
+        raise ParameterError(name, value, spec.allowed())
+    return value
+
+
+def check_controller(controller: str) -> str:
+    """Validate a controller name."""
+    return str(check_value("run.controller", controller))
+
+
+def validate(p: HexapodParams) -> HexapodParams:
+    """Cross-parameter checks (single values are checked on construction by :func:`from_flat`).
+
+    Raises :class:`ParameterError` naming the offending parameter.
+    """
+    ratio = p.sim.control_period / p.sim.dt
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        raise ParameterError("sim.control_period", p.sim.control_period,
+                             f"an integer multiple of sim.dt = {p.sim.dt:g}")
+    # Reachability of the whole gait: the hip-foot distance over a cycle (eq. 4a).
+    from .gait import reach_bounds  # numba: loaded only when a gait is checked
+
+    lo, hi = reach_bounds(p)
+    r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
+    r_max = p.robot.leg_length_1 + p.robot.leg_length_2
+    if hi >= r_max:
+        name = _reach_culprit(p, ("gait.body_height", "gait.step_length"), too_far=True)
+        raise ParameterError(name, p.to_flat()[name],
+                             f"a gait whose hip-foot distance stays below L1+L2 = {r_max:g} m "
+                             f"(this one reaches {hi:.4g} m with {_gait_text(p)}: "
+                             f"unreachable gait)")
+    if lo <= r_min:
+        name = _reach_culprit(p, ("gait.body_height", "gait.foot_clearance"), too_far=False)
+        raise ParameterError(name, p.to_flat()[name],
+                             f"a gait whose hip-foot distance stays above |L1-L2| = {r_min:g} m "
+                             f"(this one comes to {lo:.4g} m with {_gait_text(p)}: "
+                             f"unreachable gait)")
+    return p
+
+
+def _gait_text(p: HexapodParams) -> str:
+    g = p.gait
+    return (f"body_height {g.body_height:g} m, step_length {g.step_length:g} m, "
+            f"foot_clearance {g.foot_clearance:g} m")
+
+
+@lru_cache(maxsize=1)
+def _base_flat() -> dict[str, Any]:
+    return {k: v for k, v in read_params_file(default_params_path()).items() if k in SPECS}
+
+
+def _reach_culprit(p: HexapodParams, candidates: tuple[str, ...], too_far: bool) -> str:
+    """The parameter at fault for an unreachable gait: the first of ``candidates`` that
+    differs from the shipped base case and, put back to its base value, makes the gait
+    reach (else the first that differs, else the first candidate)."""
+    from .gait import reach_bounds
+
+    flat = p.to_flat()
+    base = _base_flat()
+    changed = [n for n in candidates if flat[n] != base.get(n, flat[n])]
+    r_min = abs(p.robot.leg_length_1 - p.robot.leg_length_2)
+    r_max = p.robot.leg_length_1 + p.robot.leg_length_2
+    for name in changed:
+        group, _, key = name.partition(".")
+        trial = replace(p, **{group: replace(getattr(p, group), **{key: base[name]})})
+        lo, hi = reach_bounds(trial)
+        if (hi < r_max) if too_far else (lo > r_min):
+            return name
+    return changed[0] if changed else candidates[0]
+
+
+def from_flat(flat: Mapping[str, Any]) -> HexapodParams:
+    """Build and validate parameters from dotted names; every parameter must be present."""
+    groups: dict[str, dict[str, Any]] = {g: {} for g in _GROUP_TYPES}
+    for name, value in flat.items():
+        value = check_value(name, value)
+        group, _, key = name.partition(".")
+        groups[group][key] = value
+    for g, t in _GROUP_TYPES.items():
+        for f in fields(t):
+            if f.name not in groups[g]:
+                raise ParameterError(f"{g}.{f.name}", None, "a value in the params file "
+                                     f"({SPECS[f'{g}.{f.name}'].allowed()})")
+    p = HexapodParams(**{g: t(**groups[g]) for g, t in _GROUP_TYPES.items()})
+    return validate(p)
+
+
+#: The shipped params file, relative to a ROS prefix (and to the source tree's src/).
+PARAMS_FILE = Path("hexapod_bringup") / "config" / "hexapod.yaml"
+
+
+def default_params_path() -> Path:
+    """The shipped params file with the paper's base experiment: hexapod_bringup's
+    ``config/hexapod.yaml``, found as ROS tools find it (``share/hexapod_bringup`` under an
+    ``AMENT_PREFIX_PATH`` prefix), else in the source tree beside this package."""
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        candidate = Path(prefix) / "share" / PARAMS_FILE if prefix else None
+        if candidate is not None and candidate.is_file():
+            return candidate.resolve()
+    return Path(__file__).resolve().parents[3] / PARAMS_FILE
+
+
+#: Parameters of the nodes themselves (not of the model), by node: a params file may set
+#: them in the node's own section or in '/**'. ``use_sim_time`` is every node's.
+def _node(kind: type, default: Any, desc: str, lo: float | None = None,
+          hi: float | None = None, *, lo_open: bool = False,
+          choices: tuple[str, ...] = ()) -> Spec:
+    return Spec(kind, desc, lo, hi, lo_open, False, choices, False, default)
+
+
+_TIMEOUT = _node(float, 60.0, "wall s to wait for the nodes named, then start anyway",
+                 0.0, 1e6)
+_BATCH = "wall s between two takes of the queued messages"
+_RT = _node(int, 0, "SCHED_FIFO priority of the node's control path: its main thread and "
+            "Fast DDS receive and event threads (0 = normal scheduling; needs "
+            "CAP_SYS_NICE or an rtprio limit, else a warning and normal scheduling)", 0, 98)
+_RT_DDS = _node(int, 0, "SCHED_FIFO priority of the node's Fast DDS receive and event "
+                "threads (0 = normal scheduling; needs CAP_SYS_NICE or an rtprio limit, else "
+                "a warning and normal scheduling)", 0, 98)
+#: Each node's own parameters (read at start, read-only on the node): type, default, range,
+#: meaning. Checked when a params file is read and when the node declares them.
+NODE_PARAMS: dict[str, dict[str, Spec]] = {
+    "hexapod_sim": {
+        "stop_at_end": _node(bool, False, "stop (and exit) after the tick at run.duration"),
+        "wait_for": _node(str, "trajectory_generator,pd_p_controller,pd_pf_controller,metrics",
+                          "comma-separated nodes whose endpoints must be matched before "
+                          "tick 0 ('' = none)"),
+        "startup_timeout": _TIMEOUT,
+        "switch_at": _node(float, -1.0, "simulated s of a scripted switch (-1 = none)",
+                           -1.0, 1e9),
+        "switch_to": _node(str, "", "controller of the scripted switch ('' = none)",
+                           choices=("",) + CONTROLLERS),
+        "summary_path": _node(str, "", "write the end summary as JSON to this file ('' = no)"),
+        "rt_priority": _RT,
+    },
+    "trajectory_generator": {
+        "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),
+        "publish_interval": _node(float, 0.005, "wall s between two bursts of references "
+                                  "(0: a burst at every state)", 0.0, 1.0),
+        "rt_priority": _RT},
+    "pd_p_controller": {"autostart": _node(bool, True, "configure and activate at start"),
+                        "rt_priority": _RT},
+    "pd_pf_controller": {"autostart": _node(bool, True, "configure and activate at start"),
+                         "rt_priority": _RT},
+    "metrics": {
+        "bag_path": _node(str, "", "bag directory, must not exist ('' = bags/<date-time>)"),
+        "batch_interval": _node(float, 0.005, _BATCH, 0.0, 1.0),
+        "reorder_window": _node(float, 0.5, "sim s a chunk waits for late messages behind "
+                                "the ticks", 0.0, 60.0),
+        "max_bag_size": _node(int, 0, "bytes per MCAP file before a new one starts "
+                              "(0: one file)", 0, 2**62),
+        "max_bag_duration": _node(float, 0.0, "sim s per MCAP file before a new one starts "
+                                  "(0: one file)", 0.0, 1e9),
+        "rt_priority": _RT_DDS,
+    },
+    "markers": {
+        "rate": _node(float, 30.0, "markers per simulated second (Hz)", 0.0, 1e6,
+                      lo_open=True),
+        "deliver_to": _node(str, "metrics", "comma-separated nodes that must receive the "
+                            "markers from t = 0 ('' = none)"),
+        "startup_timeout": _TIMEOUT,
+        "rt_priority": _RT_DDS,
+    },
+    "foxglove_bridge": {
+        "host": _node(str, "127.0.0.1", "address to listen on"),
+        "port": _node(int, 8765, "WebSocket port (0 = any free one)", 0, 65535),
+        "batch_interval": _node(float, 0.01, _BATCH, 0.0, 1.0),
+        "rt_priority": _RT_DDS,
+    },
+}
+COMMON_NODE_PARAMS = ("use_sim_time",)
+
+
+class YamlLoader(yaml.SafeLoader):  # type: ignore[misc]  # PyYAML ships no types
+    """PyYAML's safe loader with YAML 1.2 floats, as rcl's parser reads them: ``1e6``,
+    ``1E-3``, ``.inf``, ``-.inf``, ``.nan`` are floats (PyYAML's YAML 1.1 reads ``1e6``
+    as a string)."""
+
+
+YamlLoader.yaml_implicit_resolvers = {
+    k: [r for r in v if r[0] != "tag:yaml.org,2002:float"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                 |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                 |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                 |[-+]?\.(?:inf|Inf|INF)
+                 |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def parse_yaml(text: str) -> Any:
+    """Parse YAML text the one way the project does (params files, ``--set`` values)."""
+    return yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
+
+
+def nearest(name: str, known: Any) -> str:
+    """`` (did you mean 'x'?)`` for the closest known name, or '' if none is close."""
+    close = difflib.get_close_matches(name, list(known), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def unknown_parameter(name: str, value: Any) -> ParameterError:
+    """The error for a parameter name that is not in :data:`SPECS` (nearest known name)."""
+    return ParameterError(name, value, "a known parameter name" + nearest(name, SPECS))
+
+
+def _group_names() -> list[str]:
+    return list(_GROUP_TYPES)
+
+
+def _node_param_names() -> set[str]:
+    return {n for names in NODE_PARAMS.values() for n in names} | set(COMMON_NODE_PARAMS)
+
+
+def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, Any]) -> None:
+    """Model parameters (``group: {key: value}``) and node parameters of one section."""
+    own = _node_param_names()
+    for key, value in tree.items():
+        key = str(key)
+        if key in _GROUP_TYPES:
+            if not isinstance(value, Mapping):
+                raise ParamsFileError(
+                    f"params file {path}: '{key}' must be a group of parameters "
+                    f"({key}.{fields(_GROUP_TYPES[key])[0].name}: ...), got {value!r}")
+            for sub, v in value.items():
+                name = f"{key}.{sub}"
+                if name not in SPECS:
+                    raise ParamsFileError(f"params file {path}: "
+                                          f"{unknown_parameter(name, v)}")
+                if isinstance(v, Mapping):
+                    raise ParamsFileError(f"params file {path}: parameter '{name}' must be a "
+                                          f"value ({SPECS[name].allowed()}), got a group")
+                out[name] = v
+        elif key in own:
+            if isinstance(value, Mapping):
+                raise ParamsFileError(f"params file {path}: node parameter '{key}' must be a "
+                                      f"value, got a group")
+            _check_node_value(path, section, key, value)
+            out[key] = value
+        elif isinstance(value, Mapping):
+            raise ParamsFileError(f"params file {path}: unknown group '{key}'"
+                                  + nearest(key, _group_names()))
+        else:
+            dotted = [n for n in SPECS if n.endswith("." + key)]
+            hint = (f" (did you mean '{dotted[0]}'?)" if dotted
+                    else nearest(key, sorted(own) + _group_names()))
+            raise ParamsFileError(f"params file {path}: unknown parameter '{key}' in section "
+                                  f"'{section}'{hint}")
+
+
+def _check_node_value(path: Path, section: str, key: str, value: Any) -> None:
+    """A node parameter in a params file: known to the section's node (to some node under
+    ``/**``) and valid for every node that has it."""
+    node = section.lstrip("/")
+    owners = ([node] if section != "/**" else
+              [n for n, table in NODE_PARAMS.items() if key in table])
+    if key in COMMON_NODE_PARAMS:
+        return
+    if section != "/**" and key not in NODE_PARAMS[node]:
+        raise ParamsFileError(f"params file {path}: '{key}' is not a parameter of node "
+                              f"'{node}'" + nearest(key, NODE_PARAMS[node]))
+    for owner in owners:
+        try:
+            check_spec(key, NODE_PARAMS[owner][key], value)
+        except ParameterError as err:
+            raise ParamsFileError(f"params file {path}: node '{owner}': {err}") from None
+
+
+def read_params_file(path: str | Path) -> dict[str, Any]:
+    """Dotted name -> value from a ROS 2 params file (the ``/**`` section, then node sections).
+
+    Strict: an empty file, a file that is not ``<node>: ros__parameters: {...}``, an unknown
+    section, group or parameter (named, with the nearest known name) or a group given a
+    value raises :class:`ParamsFileError`. Node parameters (:data:`NODE_PARAMS`) come back
+    under their plain names. Numbers are read as rcl reads them (:class:`YamlLoader`).
+    """
+    path = Path(path)
+    try:
+        doc = parse_yaml(path.read_text())
+    except OSError as err:
+        raise ParamsFileError(f"cannot read params file {path}: {err.strerror}") from err
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise ParamsFileError(f"params file {path} is not valid YAML: {first}") from err
+    layout = "expected '/**: ros__parameters: <group>: <name>: value'"
+    if doc is None or doc == {}:
+        raise ParamsFileError(f"params file {path} is empty: {layout}")
+    if not isinstance(doc, Mapping):
+        raise ParamsFileError(f"params file {path} holds {type(doc).__name__} {doc!r}: {layout}")
+    nodes = ["/**"] + list(NODE_PARAMS)
+    flat: dict[str, Any] = {}
+    for node, body in doc.items():
+        name = str(node).lstrip("/") if str(node) != "/**" else "/**"
+        if name not in nodes:
+            raise ParamsFileError(f"params file {path}: unknown section '{node}'"
+                                  + nearest(str(node), nodes) + f": {layout}")
+        if not isinstance(body, Mapping) or not isinstance(body.get("ros__parameters"), Mapping):
+            raise ParamsFileError(f"params file {path}: section '{node}' lacks 'ros__parameters'")
+        extra = [k for k in body if k != "ros__parameters"]
+        if extra:
+            raise ParamsFileError(f"params file {path}: section '{node}' has '{extra[0]}' "
+                                  f"beside 'ros__parameters'")
+        _flatten(path, str(node), body["ros__parameters"], flat)
+    return flat
+
+
+def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodParams:
+    """Load and validate the params file (default: the shipped base experiment).
+
+    ``overrides`` use dotted names with '.' replaced by '__' (``ground__scale=2.0``) or can be
+    given as a dict via ``load_params(path, **{"ground.scale": 2.0})``.
+    """
+    flat = read_params_file(path or default_params_path())
+    known = {k: v for k, v in flat.items() if k in SPECS}  # the rest: node parameters
+    for name, value in overrides.items():
+        name = name.replace("__", ".")
+        if name not in SPECS:
+            raise unknown_parameter(name, value)
+        known[name] = value
+    return from_flat(known)
+
+
+__all__ = [
+    "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "GainParams",
+    "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
+    "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
+    "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",
+    "load_params", "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
+]

@@ -1,0 +1,250 @@
+"""The guard in front of every subscriber of the graph's nodes, and the signer behind every
+publisher.
+
+Each received message goes through :class:`InputGuard`: authentication (``core.msg_auth``:
+the run's key, a tag and a sequence number per message), decoding, the contract's names and
+sizes, the stamp (``core.msg_checks.StampWindow``) and finite values. A message that fails
+is dropped, counted per topic and cause, logged (the first of each topic and cause, then at
+10, 100, 1000, ... of them) and reported on ``/hexapod/status`` and in the node's end
+summary. When messages without a valid tag arrive on a topic, the guard looks up who
+publishes it (``get_publishers_info_by_topic``: rclpy cannot tell which publisher sent a
+given message) and names the publishers that are not nodes of this graph.
+"""
+from __future__ import annotations
+
+import struct
+from typing import Any, Callable
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.serialization import serialize_message
+
+from hexapod_common.runtime import conversions as C
+from hexapod_common.core import msg_checks as M
+from hexapod_common.core import topics as T
+from hexapod_common.core import trace
+from ..core.msg_auth import Rejected, Signer, Unsigned, Verifier, run_key
+
+CONTROLLER_NODES = ("pd_p_controller", "pd_pf_controller")
+GRAPH_NODES = ("hexapod_sim", "trajectory_generator", *CONTROLLER_NODES, "metrics", "markers")
+#: Who may publish each topic (node names; namespaces are not used by the graph).
+PUBLISHERS: dict[str, tuple[str, ...]] = {
+    T.CLOCK: ("hexapod_sim",), T.JOINT_STATES: ("hexapod_sim",),
+    T.FOOT_FORCES: ("hexapod_sim",), T.HIP_STATES: ("hexapod_sim",),
+    T.ACTIVE_CONTROLLER: ("hexapod_sim",), T.REFERENCE: ("trajectory_generator",),
+    T.JOINT_COMMANDS: CONTROLLER_NODES, T.INDICES: ("metrics",), T.MARKERS: ("markers",),
+    T.STATUS: GRAPH_NODES, T.PARAMETERS: (*GRAPH_NODES, "foxglove_bridge"),
+}
+#: Topics whose messages the graph's nodes sign (/clock is a bounded type: no room for a tag).
+SIGNED_TOPICS = frozenset(PUBLISHERS) - {T.CLOCK}
+_STAMP = struct.Struct("<iI")
+
+
+def _decode(codec: C.JointStateCodec, data: bytes) -> C.JointStateView:
+    """codec.decode with every failure turned into Dropped (undecodable or wrong shape)."""
+    if len(data) < 16 or data[:2] != C.ENCAPSULATION[:2]:
+        raise M.Dropped(M.UNDECODABLE, f"{len(data)} bytes, not little-endian CDR")
+    sec, nsec = _STAMP.unpack_from(data, 4)
+    if nsec >= C.NS:
+        raise M.Dropped(M.BAD_STAMP, f"nanosec {nsec} >= 1e9")
+    (flen,) = struct.unpack_from("<I", data, 12)
+    if flen == 0 or 16 + flen > len(data):
+        raise M.Dropped(M.UNDECODABLE, f"frame_id of {flen} bytes in {len(data)}")
+    try:
+        return codec.decode(data)
+    except ValueError as err:  # UnicodeDecodeError included
+        cause = M.WRONG_SHAPE if "does not carry" in str(err) else M.UNDECODABLE
+        raise M.Dropped(cause, str(err)) from err
+    except (struct.error, IndexError, OverflowError) as err:
+        raise M.Dropped(M.UNDECODABLE, str(err)) from err
+
+
+class InputGuard:
+    """Authenticates, checks and counts what one node receives; signs what it publishes.
+
+    Raises :class:`~hexapod_common.core.msg_auth.AuthError` (no or bad run key) at creation.
+    """
+
+    def __init__(self, node: Node, log: Any) -> None:
+        self.node = node
+        self.log = log
+        trace.name_process(node.get_name())
+        self.key = run_key()
+        self.drops = M.DropCounter()
+        self.outsiders: dict[str, set[str]] = {}
+        self._verifiers: dict[str, Verifier | Unsigned] = {}
+        self._suspect: set[str] = set()
+        self._looked_at = 0  # drops counted at the last look-up
+        if self.key is None:
+            log.warning("message authentication is off (HEXAPOD_AUTH=off): any process on "
+                        "this ROS_DOMAIN_ID can drive the graph")
+
+    # ------------------------------------------------------------------ publishing
+    def signer(self, topic: str) -> Signer | Unsigned:
+        """A signer for one publisher of ``topic`` (its own sender id)."""
+        return Unsigned(topic) if self.key is None else Signer(self.key, topic)
+
+    def signed(self, signer: Signer | Unsigned, msg: Any) -> bytes:
+        """A message (typed, or serialized bytes) serialized and signed."""
+        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        return signer.sign(data)
+
+    # ------------------------------------------------------------------ receiving
+    def _verifier(self, topic: str) -> Verifier | Unsigned:
+        v = self._verifiers.get(topic)
+        if v is None:
+            v = self._verifiers[topic] = (Unsigned(topic) if self.key is None
+                                          else Verifier(self.key, topic))
+        return v
+
+    def payload(self, topic: str, data: bytes) -> bytes | None:
+        """The authenticated payload of ``data`` (trailer stripped), or None (dropped)."""
+        try:
+            payload = self._verifier(topic).verify(data)
+        except Rejected as r:
+            self.drop(topic, r.cause)
+            return None
+        if trace.TRACER is not None:
+            trace.TRACER.mark(trace.VERIFIED, topic, trace.header_stamp(payload))
+        return payload
+
+    def joint_state(self, topic: str, data: bytes, period_ns: int,
+                    window: M.StampWindow | None = None, advance: bool = False
+                    ) -> C.JointStateView | None:
+        """A checked JointState of ``topic`` (None if dropped): stamped on a control tick
+        (``period_ns``) and, with ``window``, in it (``advance``: the message is the node's
+        time source)."""
+        got = self.joint_state_payload(topic, data, period_ns, window, advance)
+        return None if got is None else got[1]
+
+    def joint_state_payload(self, topic: str, data: bytes, period_ns: int,
+                            window: M.StampWindow | None = None, advance: bool = False
+                            ) -> tuple[bytes, C.JointStateView] | None:
+        """(payload, view) of a checked JointState, as :meth:`joint_state`."""
+        payload = self.payload(topic, data)
+        if payload is None:
+            return None
+        tr = trace.TRACER
+        try:
+            view = _decode(C.CODECS[topic], payload)
+            if tr is not None:
+                tr.mark(trace.DECODED, topic, view.stamp_ns)
+            M.check_finite((view.position, view.velocity, view.effort))
+            M.check_stamp(view.stamp_ns, period_ns)
+            if window is not None:
+                if advance:
+                    window.advance(view.stamp_ns)
+                else:
+                    window.check(view.stamp_ns)
+        except M.Dropped as d:
+            self.drop(topic, d.cause, d.detail)
+            return None
+        if tr is not None:
+            tr.mark(trace.CHECKED, topic, view.stamp_ns)
+        return payload, view
+
+    def string(self, topic: str, data: bytes, allowed: tuple[str, ...]
+               ) -> tuple[bytes, str] | None:
+        """(payload, text) of a checked std_msgs/String whose text is one of ``allowed``."""
+        payload = self.payload(topic, data)
+        if payload is None:
+            return None
+        try:
+            if len(payload) < 9 or payload[:2] != C.ENCAPSULATION[:2]:
+                raise M.Dropped(M.UNDECODABLE, f"{len(payload)} bytes")
+            (n,) = struct.unpack_from("<I", payload, 4)
+            if n == 0 or 8 + n > len(payload) or payload[7 + n] != 0:
+                raise M.Dropped(M.UNDECODABLE, "string length does not fit")
+            try:
+                text = payload[8:7 + n].decode()
+            except UnicodeDecodeError as err:
+                raise M.Dropped(M.UNDECODABLE, "not UTF-8") from err
+            if text not in allowed:
+                raise M.Dropped(M.BAD_CONTENT, f"{text[:40]!r} is none of {', '.join(allowed)}")
+        except M.Dropped as d:
+            self.drop(topic, d.cause, d.detail)
+            return None
+        return payload, text
+
+    # ------------------------------------------------------------------ reporting
+    def drop(self, topic: str, cause: str, detail: str = "") -> None:
+        """Count a dropped message; log the first of each (topic, cause), then every 10^k."""
+        n = self.drops.add(topic, cause)
+        if n == 1 or (n % 10 == 0 and str(n).rstrip("0") == "1"):
+            what = "a message" if n == 1 else f"{n} messages so far"
+            self.log.warning(f"dropped {what} on {topic}: {cause}"
+                             + (f" ({detail})" if detail and n == 1 else ""))
+        if cause in (M.UNAUTHENTICATED, M.REPLAYED):
+            first = topic not in self._suspect
+            self._suspect.add(topic)
+            if first:
+                self.look_up()
+
+    def look_up(self) -> None:
+        """Name the publishers of the suspect topics that are not nodes of this graph."""
+        self._looked_at = self.drops.total
+        for topic in sorted(self._suspect):
+            try:
+                infos = self.node.get_publishers_info_by_topic(topic)
+            except Exception:  # noqa: BLE001 - the graph can be gone at shutdown
+                continue
+            names = {f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos
+                     if i.node_name not in PUBLISHERS.get(topic, ()) or
+                     i.node_namespace not in ("/", "")}
+            new = names - self.outsiders.get(topic, set())
+            if new:
+                self.outsiders.setdefault(topic, set()).update(new)
+                self.log.warning(
+                    f"publishers on {topic} that are not nodes of this graph: "
+                    f"{', '.join(sorted(new))}; their messages are dropped "
+                    f"({self.drops.by_topic(topic)} so far)")
+
+    def refresh(self) -> None:
+        """Look the suspect topics' publishers up again if more was dropped (call at a low
+        rate, e.g. from the status timer)."""
+        if self._suspect and self.drops.total != self._looked_at:
+            self.look_up()
+
+    def values(self) -> dict[str, str]:
+        """Diagnostic key/values: authentication, drops, publishers outside the graph."""
+        out = {"authentication": "off" if self.key is None else "on", **self.drops.values()}
+        out["outside_publishers"] = "; ".join(
+            f"{t}: {', '.join(sorted(n))}" for t, n in sorted(self.outsiders.items())) or "none"
+        return out
+
+    def summary(self) -> str:
+        """One phrase for the end summary: drops and publishers outside the graph."""
+        text = self.drops.summary()
+        if self.outsiders:
+            text += "; publishers outside the graph: " + "; ".join(
+                f"{t}: {', '.join(sorted(n))}" for t, n in sorted(self.outsiders.items()))
+        if self.key is None:
+            text += "; authentication off"
+        return text
+
+    def publish_status(self, name: str, stamp_ns: Any, period: float = 1.0,
+                       extra: Callable[[], dict[str, str]] | None = None) -> Callable[[], None]:
+        """Publish this node's status (signed) on /hexapod/status every ``period`` wall s;
+        ``stamp_ns()`` gives the stamp, ``extra()`` more key/values. Returns the function
+        that publishes one now (e.g. at a lifecycle transition). Call before creating the
+        node's HotLoop (or refresh it after)."""
+        pub = self.node.create_publisher(DiagnosticArray, T.STATUS,
+                                         C.TOPIC_QOS[T.STATUS].publisher())
+        signer = self.signer(T.STATUS)
+
+        def tick() -> None:
+            pub.publish(signer.sign(self.status(name, stamp_ns(),
+                                                extra() if extra is not None else None)))
+        self.node.create_timer(period, tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return tick
+
+    def status(self, name: str, stamp_ns: int, extra: dict[str, str] | None = None) -> bytes:
+        """A /hexapod/status message of this node's inputs (for non-sim nodes)."""
+        self.refresh()
+        level = "warn" if self.drops.total or self.key is None else "ok"
+        return C.encode_statuses(max(0, stamp_ns), [C.Status(
+            name, level, self.drops.summary(), {**self.values(), **(extra or {})})])
+
+
+__all__ = ["GRAPH_NODES", "InputGuard", "PUBLISHERS", "SIGNED_TOPICS"]

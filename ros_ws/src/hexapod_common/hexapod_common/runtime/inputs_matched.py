@@ -1,0 +1,96 @@
+"""Whether a node's readers of the sim's per-tick topics have matched a writer on their own
+side: the ``~/inputs_matched`` service (``std_srvs/Trigger``) each subscribing node of the
+graph offers, and the sim asks before tick 0.
+
+A writer and a reader match each other independently: each side does so when its process
+has taken in the other's announcement. The sim used to start once *its* writers had matched
+every reader the graph showed (``SimNode.graph_missing``); in realtime runs at 1 kHz the
+recorder's readers matched the sim's writers ~0.2 s later on the recorder's side, and the
+samples sent meanwhile were dropped there (a volatile reader takes nothing from a writer it
+does not know yet): 2 of 4 bags began at tick ~200. Only the reading node can tell when its
+readers have matched, so it answers: ``success`` is true when each of its subscriptions to
+a topic of :data:`SIM_TOPICS` has matched at least one writer; ``message`` lists the topics
+still waiting (empty when ready). A node with no such subscription (an inactive
+controller) is ready.
+
+The answer is authenticated like the graph's messages (core/msg_auth.py): with the run's key
+the message ends with ``|`` and the hex trailer of the answer (the success flag and the
+text), signed under the service's name (:func:`seal`). The sim drops an answer that does
+not verify (:func:`opened`; counted and reported by its input guard like any dropped
+message), so a process without the key that offers ``/<node>/inputs_matched`` cannot start
+the run before that node's readers have matched.
+"""
+from __future__ import annotations
+
+from typing import Any, Callable, Iterable
+
+from rclpy.node import Node
+from rclpy.service import Service
+from rclpy.subscription import Subscription
+
+from hexapod_common.core import topics as T
+from ..core.msg_auth import TRAILER_BYTES, Signer, Unsigned
+from .input_guard import InputGuard
+
+#: Name of the service under the node's namespace (``/<node>/inputs_matched``).
+SERVICE = "inputs_matched"
+#: The topics whose writer is the sim: tick 0 waits until their readers have matched it.
+SIM_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
+
+
+def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
+    """Topics of :data:`SIM_TOPICS` among ``subscriptions`` with no matched writer yet."""
+    return sorted({s.topic_name for s in subscriptions
+                   if s.topic_name in SIM_TOPICS and s.get_publisher_count() < 1})
+
+
+def service_name(node_name: str) -> str:
+    """The service of node ``node_name`` (root namespace), also its authentication topic."""
+    return f"/{node_name}/{SERVICE}"
+
+
+def _payload(success: bool, text: str) -> bytes:
+    return f"{int(success)}|{text}".encode()
+
+
+def seal(signer: Signer | Unsigned, success: bool, text: str) -> str:
+    """An answer's message: ``text``, then (authentication on) ``|`` and the hex trailer
+    that authenticates ``success`` and ``text``."""
+    if isinstance(signer, Unsigned):
+        return text
+    return f"{text}|{signer.sign(_payload(success, text))[-TRAILER_BYTES:].hex()}"
+
+
+def opened(guard: InputGuard, name: str, success: bool, message: str) -> str | None:
+    """The text of node ``name``'s answer if it is authentic (authentication off: the
+    message); None if not (dropped: counted and logged by ``guard``)."""
+    if guard.key is None:
+        return message
+    text, sep, tag = message.rpartition("|")
+    try:
+        trailer = bytes.fromhex(tag) if sep else b""
+    except ValueError:
+        trailer = b""
+    payload = _payload(success, text)
+    data = payload + b"\0" * (-len(payload) % 8) + trailer
+    return text if guard.payload(service_name(name), data) is not None else None
+
+
+def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]],
+          guard: InputGuard) -> Service:
+    """Create ``node``'s ``~/inputs_matched`` service; ``subscriptions()`` gives the node's
+    current subscriptions (its hot loop's); answers are signed with ``guard``'s key. Call
+    the loop's ``refresh()`` afterwards."""
+    from std_srvs.srv import Trigger
+
+    signer = guard.signer(service_name(node.get_name()))
+
+    def answer(request: Any, response: Any) -> Any:
+        waiting = unmatched(subscriptions())
+        response.success = not waiting
+        response.message = seal(signer, response.success, ",".join(waiting))
+        return response
+    return node.create_service(Trigger, service_name(node.get_name()), answer)
+
+
+__all__ = ["SERVICE", "SIM_TOPICS", "offer", "opened", "seal", "service_name", "unmatched"]
