@@ -49,6 +49,44 @@ def time_signals(obs: np.ndarray, hip_ref: np.ndarray) -> dict[str, np.ndarray]:
             "Tm11": obs[:, O_TQ, 0, 0], "Tm12": obs[:, O_TQ, 0, 1]}
 
 
+def stick_picture(obs: np.ndarray, t: np.ndarray, l1: float, path: Path, title: str = "",
+                  frames: int = 3) -> Path:
+    """The robot walking, seen from its left: ``frames`` snapshots (hips, knees, feet, the
+    body line, ground forces as arrows) of one run's samples (N, 9, 6, 2) at times ``t``
+    (s), spread over the first two thirds of its last gait cycle (half the samples), one
+    panel each, in the world frame."""
+    from hexapod_metrics.core.figure import FORCE_SCALE, stick_figure
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, frames, figsize=(3.2 * frames, 2.4), dpi=110, sharey=True)
+    n = len(t)
+    picks = [n - 1 - (n // 2) + (n // 2) * j // frames for j in range(frames)]
+    for ax, k in zip(np.atleast_1d(axes), picks):
+        f = stick_figure(obs[k], l1)
+        for leg in range(f.hip.shape[0]):
+            c = "tab:blue" if leg % 2 == 0 else "tab:red"
+            ax.plot([f.hip[leg, 0], f.knee[leg, 0], f.foot[leg, 0]],
+                    [f.hip[leg, 1], f.knee[leg, 1], f.foot[leg, 1]], "-o", color=c, lw=1.2,
+                    ms=2.5, alpha=0.9)
+            if f.contact[leg]:
+                ax.arrow(f.foot[leg, 0], f.foot[leg, 1], f.force[leg, 0] * FORCE_SCALE,
+                         f.force[leg, 1] * FORCE_SCALE, color="tab:green", width=0.01,
+                         head_width=0.06, length_includes_head=True)
+        order = np.argsort(f.hip[:, 0])
+        ax.plot(f.hip[order, 0], f.hip[order, 1], "-", color="k", lw=2.5)
+        ax.axhline(0.0, color="0.4", lw=0.8)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {t[k]:.2f} s", fontsize=8)
+        ax.set_xlabel("x (m)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    np.atleast_1d(axes)[0].set_ylabel("y (m)", fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def time_plot(series: Mapping[str, tuple[np.ndarray, np.ndarray]], key: str, path: Path,
               title: str = "", fine: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None
               ) -> Path:
