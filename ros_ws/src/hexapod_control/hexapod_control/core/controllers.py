@@ -16,6 +16,7 @@ from numba import njit
 
 from hexapod_common.core.kinematics import foot_force_torque
 from hexapod_common.core.layout import O_FF, O_TH, O_THV
+from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import CONTROLLERS, GainParams, check_controller
 
 #: Integer codes of the architectures inside compiled code, in the order of CONTROLLERS.
@@ -23,8 +24,13 @@ PD_P, PD_PF = 0, 1
 
 
 def controller_code(name: str) -> int:
-    """'pd_p' -> PD_P, 'pd_pf' -> PD_PF (raises ParameterError otherwise)."""
-    return CONTROLLERS.index(check_controller(name))
+    """'pd_p' -> PD_P, 'pd_pf' -> PD_PF (raises ParameterError for any other name: only
+    the built-ins have a compiled law)."""
+    name = check_controller(name)
+    if name not in CONTROLLERS:
+        raise ParameterError("run.controller", name, "a controller with a compiled law (one "
+                             "of " + ", ".join(CONTROLLERS) + ")")
+    return CONTROLLERS.index(name)
 
 
 def gain_vector(g: GainParams) -> np.ndarray:
