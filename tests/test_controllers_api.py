@@ -10,7 +10,8 @@ from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import load_params, read_params_file, registered_controllers
 from hexapod_control.core import registry
 from hexapod_control.core.builtin import PdP, PdPf
-from hexapod_control.core.closed_loop import Case, run, run_plugin_ticks
+from hexapod_control.core.closed_loop import Case, batch_code, run, run_plugin_ticks
+from hexapod_control.core.controllers import PD_P, PD_PF, PD_PF_DRIVE
 from hexapod_bringup.core.simulate import evaluate_batch, simulate
 from hexapod_metrics.core.indices import INDEX_NAMES
 from hexapod_common.core.layout import model_vector
@@ -155,16 +156,24 @@ def test_drive_mode_pd_pf_at_1khz_runs_finite_and_differs_from_topic():
     assert topic is not None and topic.eps_xH != sim.indices.eps_xH
 
 
-def test_batch_with_plugins_equals_one_by_one():
+def test_batch_with_plugins_and_drive_equals_one_by_one():
+    """PD-P&F in the drive runs in the compiled batch (its own code), a plug-in one by one;
+    every case gets its single run's indices."""
     p = load_params(**{"sim.control_period": 5e-4})
     drive = p.with_values(**{"pd_pf.force_loop": "drive"})
-    cases = [Case(p, "pd_p"), Case(drive, "pd_pf"), Case(p, "pd_alpha"), Case(p, "pd_pf")]
+    cases = [Case(p, "pd_p"), Case(drive, "pd_pf"), Case(p, "pd_alpha"), Case(p, "pd_pf"),
+             Case(drive.with_values(**{"ground.scale": 3.0, "actuator.t_max": 170.0}),
+                  "pd_pf"),
+             Case(drive.with_values(**{"sim.dt": drive.sim.dt / 2}), "pd_pf")]
+    assert [batch_code(c) for c in cases] == [PD_P, PD_PF_DRIVE, None, PD_PF, PD_PF_DRIVE,
+                                              PD_PF_DRIVE]
     batch = evaluate_batch(cases, 2.0)
     for c, b in zip(cases, batch):
         one = simulate(c.params, c.controller, 2.0)
         assert b.status == one.outcome.status == "ok"
         for name in INDEX_NAMES:
-            assert getattr(b.indices, name) == getattr(one.indices, name)
+            assert getattr(b.indices, name) == pytest.approx(getattr(one.indices, name),
+                                                             rel=1e-12, abs=1e-15), name
 
 
 def test_switching_between_compiled_and_plugin_controllers():

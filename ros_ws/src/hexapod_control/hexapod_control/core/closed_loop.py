@@ -41,7 +41,8 @@ from hexapod_common.core.params import (N_LEGS, HexapodParams, check_controller,
 from . import registry
 from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controller_api import Observation
-from .controllers import control_law, controller_code, gain_vector
+from .builtin import PdPf
+from .controllers import PD_PF_DRIVE, control_law, controller_code, gain_vector
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
@@ -255,6 +256,16 @@ class Case:
     controller: str
 
 
+def batch_code(case: Case) -> int | None:
+    """The compiled batch's code of ``case`` (PD_P, PD_PF, PD_PF_DRIVE), or None when its law
+    is plain Python (a plug-in: run one by one)."""
+    if registry.is_compiled(case.controller, case.params):
+        return controller_code(case.controller)
+    if registry.load(case.controller) is PdPf:
+        return PD_PF_DRIVE
+    return None
+
+
 @dataclass(frozen=True)
 class BatchResult:
     """Samples of ticks k_a..k_b of every case (``obs`` (cases, k_b-k_a+1, 9, 6, 2)),
@@ -296,8 +307,8 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     t = np.arange(n + 1) * p0.sim.control_period
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
-    compiled = [registry.is_compiled(c.controller, c.params) for c in cases]
-    for j, c in enumerate(cases):  # plug-in laws and drive modes: one run each
+    compiled = [batch_code(c) is not None for c in cases]
+    for j, c in enumerate(cases):  # plug-in laws: one run each
         if not compiled[j]:
             r = run(c.params, c.controller, duration)
             obs[j] = r.obs[k_a:]
@@ -312,11 +323,11 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
 
 def _run_compiled_batch(cases: Sequence[Case], n: int, k_a: int,
                         t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Samples (cases, n+1-k_a, 9, 6, 2) and ok flags of compiled torque-only cases."""
+    """Samples (cases, n+1-k_a, 9, 6, 2) and ok flags of cases with a compiled law."""
     ref = reference(cases[0].params, t)
     S = np.stack([initial_state(c.params) for c in cases])
     Ps = np.stack([model_vector(c.params) for c in cases])
-    codes = np.array([controller_code(c.controller) for c in cases], dtype=np.int64)
+    codes = np.array([batch_code(c) for c in cases], dtype=np.int64)
     G = np.stack([gain_vector(c.params.gains(c.controller)) for c in cases])
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
@@ -340,5 +351,6 @@ def _run_compiled_batch(cases: Sequence[Case], n: int, k_a: int,
     return obs, ok
 
 
-__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "changeable", "run",
-           "run_batch", "run_plugin_ticks", "run_ticks", "shared_reference_key", "tick_count"]
+__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "batch_code",
+           "changeable", "run", "run_batch", "run_plugin_ticks", "run_ticks",
+           "shared_reference_key", "tick_count"]
