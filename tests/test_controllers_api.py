@@ -51,6 +51,12 @@ def user_module(tmp_path, monkeypatch):
             gain: float = param("joint stiffness (N m/rad)", 0.0, 1e6, default=5.0e4)
             damping: float = param("joint damping (N m s/rad)", 0.0, 1e6, default=200.0)
 
+        class NoLaw:
+            Params = P
+
+            def reset(self):
+                pass
+
         class MyCtl:
             """A plain PD written by a user."""
             name = "my_ctl"
@@ -83,6 +89,8 @@ def test_module_class_path_runs_with_its_own_parameters(user_module):
         p.with_values(**{"my_ctl.damping": -1.0})
     r = run(q, user_module, 0.05)
     assert r.diverged_at is None and np.all(np.isfinite(r.obs))
+    with pytest.raises(ParameterError, match=r"NoLaw lacks law\(\)"):
+        registry.load("my_ctl_mod:NoLaw")
     assert not np.array_equal(r.obs, run(p, user_module, 0.05).obs)
 
 
@@ -134,6 +142,24 @@ def test_plugin_loop_with_a_builtin_is_bit_identical_to_the_compiled_path():
         assert done == n
         np.testing.assert_array_equal(obs, fast.obs[:n])
         np.testing.assert_array_equal(cmd, fast.command)
+
+
+def test_pd_pf_drive_law_through_the_plugin_loop_equals_the_compiled_drive_loop():
+    """builtin.PdPf.law in drive mode (the Python law, per tick) and run_drive_ticks (what
+    run() uses for it) give the same numbers bit for bit."""
+    p = load_params(**{"sim.control_period": 5e-4, "pd_pf.force_loop": "drive"})
+    n = 300
+    fast = run(p, "pd_pf", n * p.sim.control_period)
+    s, torque = initial_state(p), np.zeros((6, 2))
+    obs, cmd = np.full_like(fast.obs[:n], np.nan), np.full_like(fast.command, np.nan)
+    ctrl = registry.create("pd_pf", p)
+    assert not ctrl.torque_only
+    done = run_plugin_ticks(s, model_vector(p), ctrl, fast.reference.theta[:n],
+                            fast.reference.theta_vel[:n], torque, p.substeps, 0.0,
+                            p.sim.control_period, obs, cmd)
+    assert done == n
+    np.testing.assert_array_equal(obs, fast.obs[:n])
+    np.testing.assert_array_equal(cmd, fast.command)
 
 
 def test_drive_force_loop_at_every_physics_step_equals_the_topic_law():

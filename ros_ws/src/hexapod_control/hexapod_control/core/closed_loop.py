@@ -7,11 +7,12 @@ The ROS graph does exactly the same across processes (sim node / controller node
 same compiled functions, so a lockstep graph run reproduces these numbers.
 
 Any registered controller runs here (registry.py). PD-P, and PD-P&F with its force loop at
-the tick, take the compiled path (:func:`run_ticks`). Every other controller (a plug-in's
-plain-Python law, PD-P&F with ``force_loop: drive``) runs a per-tick Python loop around the
-compiled observe and drive (:func:`run_plugin_ticks`): obs_k = observe(state, T_acting);
-command = law(obs_k); the drive (hexapod_sim.core.drive) evaluates the command at every
-physics step of the period. A torque-only command gives the compiled path's numbers.
+the tick, take the compiled path (:func:`run_ticks`); PD-P&F with ``force_loop: drive`` a
+compiled loop around the drive (:func:`run_drive_ticks`). A plug-in's plain-Python law
+runs a per-tick Python loop around the compiled observe and drive (:func:`run_plugin_ticks`):
+obs_k = observe(state, T_acting); command = law(obs_k); the drive (hexapod_sim.core.drive)
+evaluates the command at every physics step of the period. A torque-only command gives the
+compiled path's numbers.
 
 Batch runs (:func:`run_batch`) execute many parameter sets at once: blocks of cases with the
 case index innermost (batch_loop.py), blocks in parallel; every case gets the numbers of its
@@ -28,7 +29,7 @@ import numba
 from numba import njit
 
 from hexapod_sim.core.actuator import saturate
-from hexapod_sim.core.drive import drive_advance
+from hexapod_sim.core.drive import C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, drive_advance
 from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
                                      scratch)
 from hexapod_common.core.gait import Reference, reference
@@ -42,7 +43,8 @@ from . import registry
 from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controller_api import Observation
 from .builtin import PdPf
-from .controllers import PD_PF_DRIVE, control_law, controller_code, gain_vector
+from .controllers import (PD_P, PD_PF, PD_PF_DRIVE, control_law, controller_code,
+                          gain_vector)
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
@@ -56,6 +58,16 @@ def changeable() -> tuple[str, ...]:
     registered controller's group."""
     return ("ground.", "actuator.") + tuple(f"{controller_group(c)}."
                                             for c in controller_names())
+
+
+def compiled_code(controller: str, p: HexapodParams) -> int | None:
+    """The compiled law of ``controller`` with parameters ``p``: PD_P, PD_PF (torque-only),
+    PD_PF_DRIVE (PD-P&F's force loop in the drive), or None (a plain-Python law)."""
+    if registry.is_compiled(controller, p):
+        return controller_code(controller)
+    if registry.load(controller) is PdPf:
+        return PD_PF_DRIVE
+    return None
 
 
 @njit(cache=True)
@@ -83,6 +95,33 @@ def run_ticks(s, P, code, gains, theta_d, theta_vel_d, torque, substeps, k0, obs
             cmd_out[r] = demand
         saturate(demand, t_max, torque)
         if not advance_prepared(s, torque, P, substeps, fh, work, ff, qdd):
+            return j
+    return n
+
+
+@njit(cache=True)
+def run_drive_ticks(s, P, gains, theta_d, theta_vel_d, torque, substeps, obs_out,  # type: ignore[no-untyped-def]
+                    cmd_out):
+    """PD-P&F with its force loop in the drive, compiled: per tick, observe, then the drive
+    holds kp = K_f Kp, kd = K_f Kd, k_force = K_f, setpoints the tick's references (the
+    numbers of builtin.PdPf.law through :func:`run_plugin_ticks`). ``gains``: (Kp1, Kd1,
+    Kp2, Kd2, K_f). Records obs_out[j], cmd_out[j] (the first step's T). Returns the ticks
+    completed."""
+    fh, work, ff, qdd = scratch()
+    cmd = np.zeros((6, N_LEGS, 2))
+    kf = gains[4]
+    n = theta_d.shape[0]
+    for j in range(n):
+        observe_prepared(s, torque, P, obs_out[j], fh, work, ff, qdd)
+        for i in range(N_LEGS):
+            for m in range(2):
+                cmd[C_QREF, i, m] = theta_d[j, i, m]
+                cmd[C_DQREF, i, m] = theta_vel_d[j, i, m]
+                cmd[C_KP, i, m] = kf * gains[2 * m]
+                cmd[C_KD, i, m] = kf * gains[2 * m + 1]
+                cmd[C_TFF, i, m] = 0.0
+                cmd[C_KF, i, m] = kf
+        if not drive_advance(s, cmd, P, substeps, fh, work, ff, qdd, cmd_out[j], torque):
             return j
     return n
 
@@ -222,11 +261,17 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
         cur = [q for k, q in params_at if k <= k0][-1]
         if k0 > 0 and any(k == k0 for k, _ in params_at):
             P = model_vector(cur)
-        if registry.is_compiled(who, cur):
+        code = compiled_code(who, cur)
+        if code in (PD_P, PD_PF):
             active = None
-            done = run_ticks(s, P, controller_code(who), gain_vector(cur.gains(who)),
+            done = run_ticks(s, P, code, gain_vector(cur.gains(who)),
                              ref.theta[k0:k1], ref.theta_vel[k0:k1], torque, p.substeps, k0,
                              obs[k0:k1], cmd[k0:k1], k0)
+        elif code == PD_PF_DRIVE:
+            active = None
+            done = run_drive_ticks(s, P, gain_vector(cur.gains(who)), ref.theta[k0:k1],
+                                   ref.theta_vel[k0:k1], torque, p.substeps, obs[k0:k1],
+                                   cmd[k0:k1])
         else:
             if active is None or active[0] != who or active[1] != cur.gains(who):
                 # takes charge (or its parameters changed): a fresh, reset instance
@@ -259,11 +304,7 @@ class Case:
 def batch_code(case: Case) -> int | None:
     """The compiled batch's code of ``case`` (PD_P, PD_PF, PD_PF_DRIVE), or None when its law
     is plain Python (a plug-in: run one by one)."""
-    if registry.is_compiled(case.controller, case.params):
-        return controller_code(case.controller)
-    if registry.load(case.controller) is PdPf:
-        return PD_PF_DRIVE
-    return None
+    return compiled_code(case.controller, case.params)
 
 
 @dataclass(frozen=True)
@@ -352,5 +393,6 @@ def _run_compiled_batch(cases: Sequence[Case], n: int, k_a: int,
 
 
 __all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "batch_code",
-           "changeable", "run", "run_batch", "run_plugin_ticks", "run_ticks",
+           "changeable", "compiled_code", "run", "run_batch", "run_drive_ticks",
+           "run_plugin_ticks", "run_ticks",
            "shared_reference_key", "tick_count"]

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import fields
 from typing import Any, NamedTuple
 
+from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import (HexapodParams, Spec, controller_group,
                                         controller_names, load_controller_class)
 
@@ -32,8 +33,15 @@ def names() -> tuple[str, ...]:
 
 
 def load(name: str) -> type[Any]:
-    """The controller class of ``name`` (a registered name or module:Class)."""
-    return load_controller_class(name)
+    """The controller class of ``name`` (a registered name or module:Class); ParameterError
+    if it lacks the contract's ``Params``, ``reset()`` or ``law(obs)``."""
+    cls = load_controller_class(name)
+    missing = [m for m in ("reset", "law") if not callable(getattr(cls, m, None))]
+    if missing:
+        raise ParameterError("run.controller", name, "a controller class with Params, reset() "
+                             "and law(obs) (hexapod_control.core.controller_api); "
+                             f"{cls.__name__} lacks " + ", ".join(f"{m}()" for m in missing))
+    return cls
 
 
 def create(name: str, p: HexapodParams) -> Any:
