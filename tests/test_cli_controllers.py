@@ -69,3 +69,46 @@ def test_sweep_and_tune_take_pd_alpha(tmp_path):
     doc = json.loads((tmp_path / "tune.json").read_text())
     assert doc["controller"] == "pd_alpha"
     assert sorted(g["gains"]["kd1"] for g in doc["all"]) == [200.0, 250.0]
+
+
+USER_MODULE = '''
+from dataclasses import dataclass
+from hexapod_control.core.controller_api import param, torque_command
+
+
+@dataclass(frozen=True)
+class P:
+    stiff: float = param("joint stiffness (N m/rad)", 0.0, 1e6, default=3.0e4)
+
+
+class Stiff:
+    """A PD law with a fixed damping, written by a user."""
+    name = "stiff"
+    Params = P
+
+    def __init__(self, params, context):
+        self.k = params.stiff
+
+    def reset(self):
+        pass
+
+    def law(self, obs):
+        return torque_command(self.k * (obs.theta_d - obs.theta)
+                              + 300.0 * (obs.theta_vel_d - obs.theta_vel))
+'''
+
+
+def test_module_class_path_in_controllers_and_simulate(tmp_path):
+    (tmp_path / "cli_ctl_mod.py").write_text(USER_MODULE)
+    out = hexapod("controllers", "--load", "cli_ctl_mod:Stiff", check=True,
+                  cwd=tmp_path).stdout
+    row = [line for line in out.splitlines() if line.strip().startswith("stiff.stiff")]
+    assert len(row) == 1 and "default 30000.0" in row[0] and "float in [0, 1e+06]" in row[0]
+    r = hexapod("simulate", "--controller", "cli_ctl_mod:Stiff", "--set", "stiff.stiff=1e5",
+                "--set", "run.duration=2.0", "--control-rate", "2000", "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["cli_ctl_mod:Stiff"]["status"] == "ok"
+    r = hexapod("simulate", "--controller", "cli_ctl_mod:Stiff", "--set", "stiff.stiff=-1",
+                cwd=tmp_path)
+    assert r.returncode == 2 and "stiff.stiff" in r.stderr and "[0, 1e+06]" in r.stderr

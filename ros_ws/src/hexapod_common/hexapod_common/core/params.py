@@ -7,6 +7,13 @@ engine and the CLI accept and reject exactly the same values.
 
 Units are SI throughout (m, kg, s, N, N·m). Defaults are the paper's base experiment
 (model.md, "Experiments", E1).
+
+Controller groups (``pd_p``, ``pd_pf``, ``pd_alpha``, a user's) are not fixed here: each
+registered controller (entry point group ``hexapod.controllers``) brings its own table, the
+fields of its ``Params`` dataclass, read on first use of :data:`SPECS`. A module:Class
+controller's group is its class attribute ``name`` (default: the class name in lower case),
+known once the class is loaded (:func:`load_controller_class`). A controller parameter
+missing from a params file takes its spec's default when it has one.
 """
 from __future__ import annotations
 

@@ -5,7 +5,8 @@ A controller is a class registered by name (Python entry point group ``hexapod.c
 
 - ``Params``: a frozen dataclass whose fields are made by :func:`param` (type, range,
   default, meaning: the same table-driven checks as every other parameter; the group is
-  ``<name>.*`` in params files and ``--set``);
+  ``<name>.*`` in params files and ``--set``; a module:Class controller's name is its class
+  attribute ``name``, default the class name in lower case);
 - ``__init__(self, params, context)``: ``params`` a checked ``Params`` instance,
   ``context`` a :class:`Context` (control period, link lengths);
 - ``reset()``: forget all state (called before tick 0 and when it takes charge);
