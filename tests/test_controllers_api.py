@@ -78,6 +78,20 @@ def user_module(tmp_path, monkeypatch):
     return "my_ctl_mod:MyCtl"
 
 
+def test_drive_command_broadcasts_and_names_a_bad_field():
+    from hexapod_control.core.controller_api import DriveCommand, torque_command
+
+    t = np.arange(12.0).reshape(6, 2)
+    c = DriveCommand(0.5, np.array([1.0, 2.0]), np.full((6, 1), 3.0), 0.0, t, 0.0).stacked()
+    assert c.shape == (6, 6, 2)
+    assert np.all(c[0] == 0.5) and np.all(c[1][:, 1] == 2.0) and np.all(c[2] == 3.0)
+    np.testing.assert_array_equal(c[4], t)
+    np.testing.assert_array_equal(torque_command(t).stacked()[4], t)
+    assert not torque_command(t).stacked()[[0, 1, 2, 3, 5]].any()
+    with pytest.raises(ValueError, match=r"field dq_ref: shape \(3,\)"):
+        DriveCommand(0.0, np.zeros(3), 0.0, 0.0, 0.0, 0.0).stacked()
+
+
 def test_module_class_path_runs_with_its_own_parameters(user_module):
     cls = registry.load(user_module)
     assert cls.__name__ == "MyCtl"

@@ -71,10 +71,22 @@ class DriveCommand(NamedTuple):
     k_force: np.ndarray
 
     def stacked(self) -> np.ndarray:
-        """The command as one (6, 6, 2) float array in field order (the drive's input)."""
+        """The command as one (6, 6, 2) float array in field order (the drive's input);
+        scalars and (2,) / (6, 1) arrays broadcast to (6, 2)."""
+        try:  # fast path: six (6, 2) arrays
+            fast = np.array(self, dtype=float)
+            if fast.shape == (6,) + JOINT_SHAPE:
+                return fast
+        except ValueError:
+            pass
         out = np.empty((6,) + JOINT_SHAPE)
         for k, a in enumerate(self):
-            out[k] = np.broadcast_to(np.asarray(a, dtype=float), JOINT_SHAPE)
+            v = np.asarray(a, dtype=float)
+            try:
+                out[k] = np.broadcast_to(v, JOINT_SHAPE)
+            except ValueError:
+                raise ValueError(f"drive command field {self._fields[k]}: shape {v.shape} "
+                                 f"does not broadcast to {JOINT_SHAPE} (legs, joints)") from None
         return out
 
 
