@@ -82,8 +82,8 @@ def _i(desc: str, lo: int, hi: int) -> Any:
     return field(metadata={"spec": Spec(int, desc, lo, hi)})
 
 
-def _s(desc: str, choices: tuple[str, ...], default: str | None = None) -> Any:
-    return field(metadata={"spec": Spec(str, desc, choices=choices, default=default)})
+def _s(desc: str, choices: tuple[str, ...]) -> Any:
+    return field(metadata={"spec": Spec(str, desc, choices=choices)})
 
 
 @dataclass(frozen=True)
