@@ -17,7 +17,8 @@ average is printed before and after, and S1/S2 are also given per CPU second (wh
 core would give), next to the per-wall-second figure the targets define. The full run takes
 about 1.5 min on a busy 2-core machine; ``--quick`` about 20 s.
 
-Usage:  python scripts/bench_engine.py [--quick] [--no-s3] [--json FILE]
+Usage:  python scripts/bench_engine.py [--quick] [--no-s3] [--s1-only] [--json FILE]
+        [--controllers pd_p,pd_pf,pd_pf+drive,pd_alpha]  (S1 of plug-in laws and the drive)
 """
 from __future__ import annotations
 
@@ -98,12 +99,18 @@ def _timed(fn: Callable[[], Any]) -> float:
 
 
 # -- S1 -----------------------------------------------------------------------------------
-def bench_s1(p: HexapodParams, reps: int) -> dict[str, dict[str, list[float]]]:
+def bench_s1(p: HexapodParams, reps: int, controllers: tuple[str, ...] = ("pd_p", "pd_pf")
+             ) -> dict[str, dict[str, list[float]]]:
     """Simulated s per wall s (the figure) and per CPU s of this thread (robust to other
-    load on a shared machine) of run(p, controller), serial."""
+    load on a shared machine) of run(p, controller), serial. A controller given as
+    ``name+drive`` runs with ``<name>.force_loop = drive`` (PD-P&F's force loop in the
+    drive); a plug-in (pd_alpha, module:Class) runs its Python law per tick."""
     out: dict[str, dict[str, list[float]]] = {}
     duration = p.run.duration
-    for c in ("pd_p", "pd_pf"):
+    base = p
+    for label in controllers:
+        c, _, mode = label.partition("+")
+        p = base.with_values(**{f"{c}.force_loop": mode}) if mode else base
         run(p, c, duration=10 * p.sim.control_period)  # warm-up: load or compile
         r = run(p, c)
         if r.diverged_at is not None:
@@ -115,7 +122,7 @@ def bench_s1(p: HexapodParams, reps: int) -> dict[str, dict[str, list[float]]]:
             c1, t1 = time.thread_time(), time.perf_counter()
             wall.append(duration / (t1 - t0))
             cpu.append(duration / (c1 - c0))
-        out[c] = {"wall": wall, "cpu": cpu}
+        out[label] = {"wall": wall, "cpu": cpu}
     return out
 
 
@@ -329,6 +336,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", metavar="FILE", help="also write every raw figure to FILE")
     ap.add_argument("--no-s3", action="store_true",
                     help="skip S3 (MuJoCo comparison): S1 and S2 only")
+    ap.add_argument("--controllers", default="pd_p,pd_pf",
+                    help="S1's controllers, comma-separated registered names; name+drive "
+                    "puts the force loop in the drive (e.g. pd_p,pd_pf,pd_pf+drive,pd_alpha)")
+    ap.add_argument("--s1-only", action="store_true", help="S1 only (no S2, S3)")
     args = ap.parse_args(argv)
     q = args.quick
     p = load_params()
@@ -352,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     raw["s1"] = {}
     for label, dt, period, target in S1_CASES:
         s1 = bench_s1(p.with_values(**{"sim.dt": dt, "sim.control_period": period}),
-                      reps=3 if q else 5)
+                      reps=3 if q else 5, controllers=tuple(args.controllers.split(",")))
         raw["s1"][label] = s1
         for c, xs in s1.items():
             tgt = f">= {target:g}" if target else "-"
@@ -362,23 +373,24 @@ def main(argv: list[str] | None = None) -> int:
                      f"{m / target:.2f}" if target else "-")
     section("S1", t0)
 
-    t0 = time.perf_counter()
-    s2 = bench_s2(p, n_scales=16 if q else 64, duration=3.0, reps=1 if q else 3,
-                  one_thread=not q)
-    raw["s2"] = s2
-    section("S2", t0)
-    m = _median(s2["rates"])
-    _row(rows, "S2", f"run_batch {s2['cases']} cases x {s2['duration']:g} s, sim s / wall s "
-         f"({s2['threads']} thr)", f">= {S2_TARGET:g}", f"{m:.0f}", f"{m / S2_TARGET:.2f}")
-    m = _median(s2["cpu_rates"])
-    _row(rows, "S2", "  same, sim s / CPU s of the process (per core)", f">= {S2_TARGET:g}",
-         f"{m:.0f}", f"{m / S2_TARGET:.2f}")
-    if s2["one_thread_rate"] is not None:
-        m1 = s2["one_thread_rate"]
-        _row(rows, "S2", "  same on 1 thread (parallel scaling)", f">= {S2_TARGET:g}",
-             f"{m1:.0f}", f"{m1 / S2_TARGET:.2f}")
+    if not args.s1_only:
+        t0 = time.perf_counter()
+        s2 = bench_s2(p, n_scales=16 if q else 64, duration=3.0, reps=1 if q else 3,
+                      one_thread=not q)
+        raw["s2"] = s2
+        section("S2", t0)
+        m = _median(s2["rates"])
+        _row(rows, "S2", f"run_batch {s2['cases']} cases x {s2['duration']:g} s, sim s / wall s "
+             f"({s2['threads']} thr)", f">= {S2_TARGET:g}", f"{m:.0f}", f"{m / S2_TARGET:.2f}")
+        m = _median(s2["cpu_rates"])
+        _row(rows, "S2", "  same, sim s / CPU s of the process (per core)", f">= {S2_TARGET:g}",
+             f"{m:.0f}", f"{m / S2_TARGET:.2f}")
+        if s2["one_thread_rate"] is not None:
+            m1 = s2["one_thread_rate"]
+            _row(rows, "S2", "  same on 1 thread (parallel scaling)", f">= {S2_TARGET:g}",
+                 f"{m1:.0f}", f"{m1 / S2_TARGET:.2f}")
 
-    if args.no_s3:
+    if args.no_s3 or args.s1_only:
         _row(rows, "S3", "MuJoCo comparison", "-", "not measured: --no-s3", "-")
     elif mujoco is None:
         _row(rows, "S3", "MuJoCo comparison", "-", "not measured: mujoco not installed", "-")
@@ -429,9 +441,10 @@ def main(argv: list[str] | None = None) -> int:
     print("\nS1 samples (wall): " + "; ".join(
         f"{label} {c}: " + ", ".join(f"{x:.1f}" for x in xs["wall"])
         for label, s1 in raw["s1"].items() for c, xs in s1.items()))
-    print(f"S2 samples: {', '.join(f'{x:.0f}' for x in raw['s2']['rates'])} "
-          f"({raw['s2']['ok']}/{raw['s2']['cases']} cases finished, threading layer "
-          f"{raw['s2']['layer']})")
+    if "s2" in raw:
+        print(f"S2 samples: {', '.join(f'{x:.0f}' for x in raw['s2']['rates'])} "
+              f"({raw['s2']['ok']}/{raw['s2']['cases']} cases finished, threading layer "
+              f"{raw['s2']['layer']})")
     print("section wall times incl. warm-up/compile: " + ", ".join(
         f"{k} {v:.0f} s" for k, v in raw["section_wall_s"].items()))
     raw["loadavg_after"] = os.getloadavg()

@@ -23,7 +23,7 @@ def test_defaults_are_the_paper_base_experiment():
     ("gait.duty_factor", 0.0, r"float in \(0, 1\)"),
     ("actuator.t_max", 0.0, r"float in \(0, inf\]"),
     ("actuator.t_max", -5.0, r"float in \(0, inf\]"),
-    ("run.controller", "pid", "one of pd_p, pd_pf"),
+    ("run.controller", "pid", "one of pd_alpha, pd_p, pd_pf"),
     ("body.k_x", "stiff", "float"),
     ("run.eval_cycles", 1.5, "int"),
     ("sim.dt", True, "float"),

@@ -189,7 +189,9 @@ CLI_ONLY = [
     (["simulate", "--duration", "1e6"], "parameter 'run.duration' = 1000000.0 is invalid: "
      "allowed at most"),
     (["simulate", "--switch", "nan:pd_p"], "--switch expects TIME:CONTROLLER"),
-    (["simulate", "--switch", "1:pd_x"], "CONTROLLER must be pd_p or pd_pf"),
+    (["simulate", "--switch", "1:pd_x"],
+     "--switch '1:pd_x': parameter 'run.controller' = 'pd_x' is invalid: allowed one of "
+     "pd_alpha, pd_p, pd_pf"),
     (["sweep", "ground", "--range", "10:100"], "argument --range: '10:100' is not"),
     (["sweep", "ground", "--range", "10:100:0"], "argument --range: '10:100:0': N = 0"),
     (["sweep", "ground", "--range", ","], "argument --range: ',' is not"),

@@ -24,5 +24,10 @@ setup(
             'pd_p_controller = hexapod_control.controller_node:main_pd_p',
             'pd_pf_controller = hexapod_control.controller_node:main_pd_pf',
         ],
+        'hexapod.controllers': [
+            'pd_p = hexapod_control.core.builtin:PdP',
+            'pd_pf = hexapod_control.core.builtin:PdPf',
+            'pd_alpha = hexapod_control.core.pd_alpha:PdAlpha',
+        ],
     },
 )

@@ -19,7 +19,8 @@ from .cli_args import OneLineParser, param_value, params_arguments, params_from_
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.
 COMMAND_MODULES = ("hexapod_bringup.cmd_graph", "hexapod_bringup.cmd_experiments",
-                   "hexapod_bringup.cmd_analyze", "hexapod_bringup.animation")
+                   "hexapod_bringup.cmd_analyze", "hexapod_bringup.animation",
+                   "hexapod_bringup.cmd_controllers")
 #: Subcommands that talk to a running graph: parsed and run by cmd_graph alone, without
 #: importing the engine, numba and the plots (a second of CPU that a realtime graph on the
 #: same cores would feel).
@@ -34,9 +35,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from hexapod_metrics.core.indices import REPORTED_NAMES, INDEX_UNITS
     from .core.simulate import simulate
 
+    from .cmd_controllers import controller_list, preload
+
+    preload(args.controller)
     p = params_from_args(args)
-    controllers = [args.controller or p.run.controller] if args.controller != "both" else [
-        "pd_p", "pd_pf"]
+    controllers = controller_list(args.controller or p.run.controller)
     results = {}
     switches = []
     for item in args.switch:
@@ -48,8 +51,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         if not sep or not (0.0 <= t_switch <= (args.duration or p.run.duration)):
             raise HexapodError(f"--switch expects TIME:CONTROLLER with TIME in [0, duration = "
                                f"{args.duration or p.run.duration:g}] s, got {item!r}")
-        if who not in ("pd_p", "pd_pf"):
-            raise HexapodError(f"--switch {item!r}: CONTROLLER must be pd_p or pd_pf")
+        controller_list(who, f"--switch {item!r}")
         switches.append((t_switch, who))
     changes = []
     for item in args.change:
@@ -95,8 +97,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("simulate", help="run the in-process engine (no ROS) and print indices")
     params_arguments(sp)
-    sp.add_argument("--controller", choices=["pd_p", "pd_pf", "both"],
-                    help="controller (default: run.controller of the params file)")
+    sp.add_argument("--controller", metavar="NAME[,NAME...]",
+                    help="controller(s): registered names (`hexapod controllers`), "
+                    "module:Class paths, or 'both' = pd_p,pd_pf (default: run.controller of "
+                    "the params file)")
     sp.add_argument("--duration", type=param_value("run.duration"),
                     help="simulated seconds (default run.duration)")
     sp.add_argument("--json", action="store_true", help="print JSON instead of a table")

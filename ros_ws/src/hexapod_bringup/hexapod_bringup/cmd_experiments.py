@@ -14,6 +14,7 @@ import numpy as np
 from hexapod_common.core.errors import HexapodError
 
 from .cli_args import params_arguments, params_from_args, parse_range
+from .cmd_controllers import controller_list, preload
 from hexapod_metrics.core.indices import INDEX_NAMES
 
 
@@ -74,15 +75,12 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         args.range = "10:1000:21" if args.kind == "ground" else "100:400:13:lin"
     _floats(args.range, "--range")
     _floats(args.t_max_list, "--t-max-list")
-    for c in args.controllers.split(","):
-        if c not in ("pd_p", "pd_pf"):
-            raise HexapodError(f"argument --controllers: {c!r} is not pd_p or pd_pf")
+    controllers = tuple(controller_list(args.controllers, "--controllers"))
     p = params_from_args(args)
     backend = _backend(args)
     prog = progress_factory(not args.no_progress)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    controllers = tuple(args.controllers.split(","))
     runs = 3 if args.check else 1
     results = []
     if args.kind == "ground":
@@ -127,11 +125,11 @@ def _cmd_converge(args: argparse.Namespace) -> int:
 
     from .core.convergence import REFINEMENTS, check_cases, tolerance
 
+    preload(args.controller)
     p = params_from_args(args)
     if args.backend is None and not args.dask:
         args.backend = "inline"  # a handful of runs: one batch in this process
-    controllers = ["pd_p", "pd_pf"] if args.controller == "both" else [
-        args.controller or p.run.controller]
+    controllers = controller_list(args.controller or p.run.controller)
     total = len(controllers) * len(REFINEMENTS)
     checks = check_cases([Case(p, c) for c in controllers], p.run.duration, _backend(args),
                          progress_factory(not args.no_progress)("convergence", total))
@@ -159,6 +157,7 @@ def _cmd_converge(args: argparse.Namespace) -> int:
 def _cmd_tune(args: argparse.Namespace) -> int:
     from .core.experiments import default_grid, tune
 
+    controller_list(args.controller)
     p = params_from_args(args)
     grid = default_grid(p, args.controller, _floats(args.factors, "--factors"))
     for item in args.grid:
@@ -211,24 +210,27 @@ def _opt(*flags: str, **kw: Any) -> _Opt:
 #: The experiment commands: name, help, handler, own options (each also takes the params
 #: options and the backend options).
 COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt, ...]], ...] = (
-    ("sweep", "ground or T_max sweep for both controllers (E2-E4)", _cmd_sweep, (
+    ("sweep", "ground or T_max sweep for the controllers (E2-E4)", _cmd_sweep, (
         _opt("kind", choices=["ground", "tmax"], help="what to sweep"),
         _opt("--range", default=None,
              help="values: 'lo:hi:n' log-spaced, 'lo:hi:n:lin', or 'a,b,c'; ground in "
              "%% (default 10:1000:21), T_max in N m (default 100:400:13:lin)"),
         _opt("--t-max-list", default="400,170", dest="t_max_list",
              help="ground sweep: T_max values, one sweep each (default 400,170)"),
-        _opt("--controllers", default="pd_p,pd_pf"),
+        _opt("--controllers", default="pd_p,pd_pf",
+             help="comma-separated registered controllers or module:Class paths"),
         _opt("--out", default="sweeps", help="output directory (CSV, JSON, PNG)"),
         _opt("--check", action="store_true",
              help="rerun every point at dt/2 and dt/4 and report its convergence"))),
     ("converge", "rerun a case at dt/2 and dt/4: is it converged?", _cmd_converge, (
-        _opt("--controller", choices=["pd_p", "pd_pf", "both"], default="both"),
+        _opt("--controller", default="both",
+             help="controller(s), comma-separated, or 'both' = pd_p,pd_pf"),
         _opt("--json", help="write the three runs and the verdicts to this file"),
         _opt("--strict", action="store_true",
              help="exit with code 1 if a controller's indices are not converged"))),
     ("tune", "brute-force gain search (E5)", _cmd_tune, (
-        _opt("--controller", choices=["pd_p", "pd_pf"], required=True),
+        _opt("--controller", required=True,
+             help="a registered controller or module:Class whose gains kp1..kd2 to tune"),
         _opt("--factors", default="0.5,0.75,1,1.5,2",
              help="default grid: each gain of the params file times these factors"),
         _opt("--grid", action="append", default=[], metavar="GAIN=VALUES",

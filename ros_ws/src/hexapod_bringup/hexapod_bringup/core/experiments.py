@@ -12,7 +12,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from hexapod_control.core.closed_loop import Case
-from hexapod_common.core.params import CONTROLLERS, HexapodParams
+from hexapod_common.core.params import CONTROLLERS, HexapodParams, controller_group
 
 from .convergence import Convergence, check_cases
 from hexapod_metrics.core.indices import INDEX_NAMES, REPORTED_NAMES
@@ -264,7 +264,8 @@ def tune(p: HexapodParams, controller: str, grid: Mapping[str, Sequence[float]] 
     names = list(grid)
     gains = [dict(zip(names, combo)) for combo in itertools.product(*grid.values())]
     ref_gains = {n: getattr(p.gains(controller), n) for n in names}
-    cases = [Case(p.with_values(**{f"{controller}.{n}": v for n, v in g.items()}), controller)
+    group = controller_group(controller)
+    cases = [Case(p.with_values(**{f"{group}.{n}": v for n, v in g.items()}), controller)
              for g in gains]
     cases.append(Case(p, controller))
     convs: list[Convergence] | None = None

@@ -7,10 +7,19 @@ engine and the CLI accept and reject exactly the same values.
 
 Units are SI throughout (m, kg, s, N, N·m). Defaults are the paper's base experiment
 (model.md, "Experiments", E1).
+
+Controller groups (``pd_p``, ``pd_pf``, ``pd_alpha``, a user's) are not fixed here: each
+registered controller (entry point group ``hexapod.controllers``) brings its own table, the
+fields of its ``Params`` dataclass, read on first use of :data:`SPECS`. A module:Class
+controller's group is its class attribute ``name`` (default: the class name in lower case),
+known once the class is loaded (:func:`load_controller_class`). A controller parameter
+missing from a params file takes its spec's default when it has one.
 """
 from __future__ import annotations
 
 import difflib
+import importlib
+import importlib.metadata
 import math
 import os
 import re
@@ -24,7 +33,11 @@ import yaml
 from .errors import ParameterError, ParamsFileError
 from .kinematics import N_LEGS
 
+#: The built-in controllers with a compiled law (the ROS graph's controller nodes). Every
+#: registered controller (:func:`controller_names`) is accepted by ``run.controller``.
 CONTROLLERS = ("pd_p", "pd_pf")
+#: Python entry-point group of controller plug-ins (``name = module:Class``).
+CONTROLLER_GROUP = "hexapod.controllers"
 MODES = ("lockstep", "realtime")
 INTEGRATORS = ("implicit_ground_damping", "semi_implicit_euler")
 
@@ -168,16 +181,161 @@ class SimParams:
 class RunParams:
     """What one run does."""
 
-    controller: str = _s("controller in charge", CONTROLLERS)
+    controller: str = field(metadata={"spec": Spec(
+        str, "controller in charge: a registered name (`hexapod controllers`) or "
+        "module:Class")})
     duration: float = _f("simulated duration (s)", 0.0, 1e6, lo_open=True)
     eval_cycles: int = _i("gait cycles at the end of the run that the indices cover", 1, 1000)
 
 
-_GROUP_TYPES: dict[str, type] = {
+#: The model's own groups, in their listing order (controller groups go before "sim").
+_MODEL_GROUPS: dict[str, type] = {
     "robot": RobotParams, "body": BodyParams, "ground": GroundParams, "gait": GaitParams,
-    "actuator": ActuatorParams, "pd_p": GainParams, "pd_pf": GainParams, "sim": SimParams,
-    "run": RunParams,
+    "actuator": ActuatorParams, "sim": SimParams, "run": RunParams,
 }
+#: Controller groups: name -> the controller's parameter dataclass (its spec table), filled
+#: from the registered controllers (:func:`register_controller_group`, entry points).
+_CONTROLLER_GROUPS: dict[str, type] = {}
+#: module:Class paths -> the group name their class declares.
+_CONTROLLER_ALIASES: dict[str, str] = {}
+
+
+class _GroupTypes(dict[str, type]):
+    """Group name -> dataclass, model groups and controller groups in listing order; reads
+    the registered controllers on first use."""
+
+    def _all(self) -> dict[str, type]:
+        _discover()
+        ctrl = sorted(_CONTROLLER_GROUPS, key=lambda n: (n not in CONTROLLERS, n))
+        out = {k: v for k, v in _MODEL_GROUPS.items() if k != "sim" and k != "run"}
+        out.update((n, _CONTROLLER_GROUPS[n]) for n in ctrl)
+        out["sim"], out["run"] = _MODEL_GROUPS["sim"], _MODEL_GROUPS["run"]
+        return out
+
+    def __getitem__(self, key: str) -> type:
+        return self._all()[key]
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._all()
+
+    def __iter__(self) -> Any:
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self._all().get(key, default)
+
+    def items(self) -> Any:
+        return self._all().items()
+
+    def keys(self) -> Any:
+        return self._all().keys()
+
+    def values(self) -> Any:
+        return self._all().values()
+
+
+_GROUP_TYPES = _GroupTypes()
+_discovering = False
+_discovered = False
+
+
+def registered_controllers() -> dict[str, importlib.metadata.EntryPoint]:
+    """Controller name -> its entry point in the group :data:`CONTROLLER_GROUP` (nothing is
+    imported; read once per process)."""
+    return dict(_entry_points())
+
+
+@lru_cache(maxsize=1)
+def _entry_points() -> tuple[tuple[str, importlib.metadata.EntryPoint], ...]:
+    return tuple((ep.name, ep) for ep in importlib.metadata.entry_points(group=CONTROLLER_GROUP))
+
+
+def controller_names() -> tuple[str, ...]:
+    """Names of the registered controllers, sorted (built-ins included)."""
+    return tuple(sorted(set(registered_controllers()) | set(_CONTROLLER_GROUPS)))
+
+
+def register_controller_group(name: str, params_type: type, alias: str | None = None) -> None:
+    """Make ``name.*`` parameters (the fields of the dataclass ``params_type``, each with a
+    :class:`Spec` in its metadata) known; ``alias``: a module:Class path naming the same
+    controller."""
+    for f in fields(params_type):
+        if not isinstance(f.metadata.get("spec"), Spec):
+            raise TypeError(f"controller {name!r}: parameter {f.name!r} of "
+                            f"{params_type.__name__} has no Spec (use controller_api.param)")
+    if _CONTROLLER_GROUPS.get(name, params_type) is not params_type:
+        raise ParameterError("run.controller", name, "one class per controller name "
+                             f"({name!r} is already {_CONTROLLER_GROUPS[name].__name__}'s)")
+    _CONTROLLER_GROUPS[name] = params_type
+    if alias:
+        _CONTROLLER_ALIASES[alias] = name
+    SPECS.refresh()
+
+
+def load_controller_class(name: str) -> type:
+    """The class of the controller ``name``: a registered name or a module:Class path (its
+    parameter group is registered on the way). ParameterError lists the known names."""
+    eps = registered_controllers()
+    try:
+        if name in eps:
+            cls = eps[name].load()
+            group = name
+        elif ":" in name:
+            module, _, attr = name.partition(":")
+            cls = importlib.import_module(module)
+            for part in attr.split("."):
+                cls = getattr(cls, part)
+            group = str(getattr(cls, "name", "") or attr.split(".")[-1].lower())
+        else:
+            raise unknown_controller(name)
+    except (ImportError, AttributeError) as err:
+        raise ParameterError("run.controller", name, f"an importable module:Class ({err}); "
+                             "registered: " + ", ".join(controller_names())) from None
+    if not isinstance(cls, type):
+        raise ParameterError("run.controller", name, "a class")
+    params_type: type = getattr(cls, "Params", None) or _no_params(name)
+    register_controller_group(group, params_type, name if group != name else None)
+    return cls
+
+
+def unknown_controller(name: str) -> ParameterError:
+    """The one-line error for a controller name that is not registered (lists the known)."""
+    return ParameterError("run.controller", name, "one of " + ", ".join(controller_names())
+                          + " (registered controllers) or a module:Class path"
+                          + nearest(name, controller_names()))
+
+
+def _no_params(name: str) -> type:
+    raise ParameterError("run.controller", name, "a controller class with a Params dataclass "
+                         "(see hexapod_control.core.controller_api)")
+
+
+def controller_group(name: str) -> str:
+    """The parameter group of controller ``name`` (its own name, or a module:Class path's
+    declared name)."""
+    if name in _CONTROLLER_ALIASES:
+        return _CONTROLLER_ALIASES[name]
+    if ":" in name:
+        load_controller_class(name)
+        return _CONTROLLER_ALIASES.get(name, name)
+    return name
+
+
+def _discover() -> None:
+    """Register the parameter groups of every entry-point controller (once)."""
+    global _discovering, _discovered
+    if _discovered or _discovering:
+        return
+    _discovering = True
+    try:
+        for name, ep in registered_controllers().items():
+            register_controller_group(name, ep.load().Params)
+        _discovered = True
+    finally:
+        _discovering = False
 
 
 @dataclass(frozen=True)
@@ -189,10 +347,19 @@ class HexapodParams:
     ground: GroundParams
     gait: GaitParams
     actuator: ActuatorParams
-    pd_p: GainParams
-    pd_pf: GainParams
     sim: SimParams
     run: RunParams
+    #: (group name, parameters) of every controller group, in listing order.
+    controllers: tuple[tuple[str, Any], ...] = ()
+
+    def __getattr__(self, name: str) -> Any:
+        """A controller's group by name: ``p.pd_p``, ``p.pd_alpha``."""
+        if name.startswith("__") or name == "controllers":
+            raise AttributeError(name)
+        for group, values in self.controllers:
+            if group == name:
+                return values
+        raise AttributeError(f"no parameter group {name!r}")
 
     # -- derived quantities --------------------------------------------------
     @property
@@ -205,10 +372,16 @@ class HexapodParams:
         """Physics steps per control period."""
         return int(round(self.sim.control_period / self.sim.dt))
 
-    def gains(self, controller: str) -> GainParams:
-        """Gains of ``controller`` ('pd_p' or 'pd_pf')."""
-        check_controller(controller)
-        return self.pd_p if controller == "pd_p" else self.pd_pf
+    def gains(self, controller: str) -> Any:
+        """Parameters of ``controller`` (its group: GainParams for 'pd_p', ...); a group
+        this set was loaded without takes the spec table's defaults."""
+        group = controller_group(check_controller(controller))
+        for name, values in self.controllers:
+            if name == group:
+                return values
+        if group not in _CONTROLLER_GROUPS:
+            raise unknown_controller(controller)
+        return _default_group(group)
 
     def with_values(self, **dotted: Any) -> "HexapodParams":
         """A validated copy with some parameters changed:
@@ -223,10 +396,28 @@ class HexapodParams:
     def to_flat(self) -> dict[str, Any]:
         """Dotted name -> value, the ROS parameter view."""
         out: dict[str, Any] = {}
-        for group in fields(self):
-            for f in fields(_GROUP_TYPES[group.name]):
-                out[f"{group.name}.{f.name}"] = getattr(getattr(self, group.name), f.name)
+        own = dict(self.controllers)
+        for group in _GROUP_TYPES:
+            values = own.get(group) if group in _CONTROLLER_GROUPS else getattr(self, group)
+            if values is None:
+                continue
+            for f in fields(values):
+                out[f"{group}.{f.name}"] = getattr(values, f.name)
         return out
+
+
+def _default_group(group: str) -> Any:
+    """A controller group from its spec table's defaults (ParameterError if one lacks a
+    default)."""
+    t = _CONTROLLER_GROUPS[group]
+    values = {}
+    for f in fields(t):
+        spec: Spec = f.metadata["spec"]
+        if spec.default is None:
+            raise ParameterError(f"{group}.{f.name}", None, "a value in the params file "
+                                 f"({spec.allowed()})")
+        values[f.name] = check_spec(f"{group}.{f.name}", spec, spec.default)
+    return t(**values)
 
 
 def specs() -> dict[str, Spec]:
@@ -235,7 +426,53 @@ def specs() -> dict[str, Spec]:
             for f in fields(t)}
 
 
-SPECS: dict[str, Spec] = specs()
+class _Specs(dict[str, Spec]):
+    """:func:`specs` as a dict that reads the registered controllers on first use."""
+
+    def refresh(self) -> None:
+        """Rebuild from the groups known now."""
+        dict.clear(self)
+        dict.update(self, specs())
+
+    def _ready(self) -> None:
+        if not _discovered and not _discovering:
+            _discover()
+            self.refresh()
+
+    def __getitem__(self, key: str) -> Spec:
+        self._ready()
+        return dict.__getitem__(self, key)
+
+    def __contains__(self, key: object) -> bool:
+        self._ready()
+        return dict.__contains__(self, key)
+
+    def __iter__(self) -> Any:
+        self._ready()
+        return dict.__iter__(self)
+
+    def __len__(self) -> int:
+        self._ready()
+        return dict.__len__(self)
+
+    def get(self, key: str, default: Any = None) -> Any:
+        self._ready()
+        return dict.get(self, key, default)
+
+    def items(self) -> Any:
+        self._ready()
+        return dict.items(self)
+
+    def keys(self) -> Any:
+        self._ready()
+        return dict.keys(self)
+
+    def values(self) -> Any:
+        self._ready()
+        return dict.values(self)
+
+
+SPECS: _Specs = _Specs()
 
 
 def check_value(name: str, value: Any) -> Any:
@@ -274,8 +511,12 @@ def check_spec(name: str, spec: Spec, value: Any) -> Any:
 
 
 def check_controller(controller: str) -> str:
-    """Validate a controller name."""
-    return str(check_value("run.controller", controller))
+    """Validate a controller name: a registered controller or a module:Class path (loaded
+    when a run needs it). ParameterError lists the registered names."""
+    name = str(check_value("run.controller", controller))
+    if ":" not in name and name not in controller_names():
+        raise unknown_controller(name)
+    return name
 
 
 def validate(p: HexapodParams) -> HexapodParams:
@@ -349,9 +590,17 @@ def from_flat(flat: Mapping[str, Any]) -> HexapodParams:
     for g, t in _GROUP_TYPES.items():
         for f in fields(t):
             if f.name not in groups[g]:
+                spec = SPECS[f"{g}.{f.name}"]
+                if spec.default is not None:  # a parameter newer than the file
+                    groups[g][f.name] = check_spec(f"{g}.{f.name}", spec, spec.default)
+                    continue
                 raise ParameterError(f"{g}.{f.name}", None, "a value in the params file "
-                                     f"({SPECS[f'{g}.{f.name}'].allowed()})")
-    p = HexapodParams(**{g: t(**groups[g]) for g, t in _GROUP_TYPES.items()})
+                                     f"({spec.allowed()})")
+    model = {g: t(**groups[g]) for g, t in _MODEL_GROUPS.items()}
+    ctrl = tuple((g, t(**groups[g])) for g, t in _GROUP_TYPES.items()
+                 if g in _CONTROLLER_GROUPS)
+    p = HexapodParams(**model, controllers=ctrl)
+    check_controller(p.run.controller)
     return validate(p)
 
 
@@ -593,7 +842,9 @@ def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodPara
 
 
 __all__ = [
-    "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "GainParams",
+    "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "CONTROLLER_GROUP",
+    "GainParams", "controller_group", "controller_names", "load_controller_class",
+    "register_controller_group", "registered_controllers", "unknown_controller",
     "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
     "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
     "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",

@@ -3,7 +3,10 @@
 Each block holds cases of one physics step count per tick (``substeps``) as columns of
 hexapod_sim.core.batch_physics arrays and runs closed_loop.run_ticks's tick for all of them:
 observe (state part shared with the first physics step), control law, saturation,
-``substeps`` physics steps. A case that diverges leaves its block at once (its column is
+``substeps`` physics steps. Columns of code PD_PF_DRIVE (PD-P&F with its force loop in the
+drive) get their torque at every physics step from the drive law instead
+(hexapod_sim.core.drive, same arithmetic), with the foot force at the step's start under
+the previous step's torque. A case that diverges leaves its block at once (its column is
 swapped behind the active ones), so it costs the others nothing. Blocks run in parallel
 (numba ``prange``, one block per thread at a time).
 """
@@ -16,10 +19,11 @@ from hexapod_sim.core.actuator import clip_torque
 from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_sample,
                                             block_scratch, block_solve, swap_columns)
 from hexapod_sim.core.engine import state_ok
-from hexapod_common.core.layout import P_L1, P_L2, P_TMAX, Q0, V0
+from hexapod_common.core.kinematics import foot_force_torque
+from hexapod_common.core.layout import P_DT, P_L1, P_L2, P_TMAX, Q0, V0
 from hexapod_common.core.params import N_LEGS
 
-from .controllers import leg_demand
+from .controllers import PD_PF_DRIVE, leg_demand
 
 #: Most cases per block: the block arrays' width (their work arrays stay in a core's L2).
 MAX_BLOCK = LANES
@@ -34,6 +38,33 @@ def _drop(X, PT, TQ, G, codes, cols, b, last):  # type: ignore[no-untyped-def]
     swap_columns(G, b, last)
     codes[b], codes[last] = codes[last], codes[b]
     cols[b], cols[last] = cols[last], cols[b]
+
+
+@njit(cache=True)
+def drive_columns(X, PT, G, codes, n, TQ, FF, theta_d, theta_vel_d, step):  # type: ignore[no-untyped-def]
+    """PD-P&F's drive law at physics step ``step`` of the tick for the PD_PF_DRIVE columns:
+    kp = K_f Kp, kd = K_f Kd, k_force = K_f, setpoints the tick's references theta_d,
+    theta_vel_d (6, 2); FF the foot force at the step's start; writes the saturated torque
+    into TQ."""
+    for b in range(n):
+        if codes[b] != PD_PF_DRIVE:
+            continue
+        kf = G[4, b]
+        el = step * PT[P_DT, b]
+        for i in range(N_LEGS):
+            th1, th2 = X[Q0 + 4 * i + 2, b], X[Q0 + 4 * i + 3, b]
+            tau1, tau2 = 0.0, 0.0
+            if kf != 0.0:
+                tau1, tau2 = foot_force_torque(th1, th2, FF[2 * i, b], FF[2 * i + 1, b],
+                                               PT[P_L1, b], PT[P_L2, b])
+            for j in range(2):
+                q = th1 if j == 0 else th2
+                dq = X[V0 + 4 * i + 2 + j, b]
+                tau = tau1 if j == 0 else tau2
+                kp, kd = kf * G[2 * j, b], kf * G[2 * j + 1, b]
+                qr, dqr = theta_d[i, j], theta_vel_d[i, j]
+                v = kp * (qr + dqr * el - q) + kd * (dqr - dq) + 0.0 - kf * tau
+                TQ[2 * i + j, b] = clip_torque(v, PT[P_TMAX, b])
 
 
 @njit(cache=True, error_model="numpy")
@@ -51,6 +82,10 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
     TQ = np.zeros((2 * N_LEGS, LANES))
     n_ticks = theta_d.shape[0]
     n_rec = obs_out.shape[1]
+    any_drive = False
+    for b in range(n):
+        if codes[b] == PD_PF_DRIVE:
+            any_drive = True
     for k in range(n_ticks + 1):
         block_prepare(X, PT, n, FH, WK, TR)
         block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG)
@@ -64,6 +99,8 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
             thd1, thd2 = theta_d[k, i, 0], theta_d[k, i, 1]
             wd1, wd2 = theta_vel_d[k, i, 0], theta_vel_d[k, i, 1]
             for b in range(n):
+                if codes[b] == PD_PF_DRIVE:
+                    continue  # the drive sets its torque at every physics step
                 t1, t2 = leg_demand(codes[b], G[0, b], G[1, b], G[2, b], G[3, b], G[4, b],
                                     X[Q0 + 4 * i + 2, b], X[Q0 + 4 * i + 3, b],
                                     X[V0 + 4 * i + 2, b], X[V0 + 4 * i + 3, b],
@@ -74,6 +111,10 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
         for step in range(substeps):
             if step > 0:
                 block_prepare(X, PT, n, FH, WK, TR)
+                if any_drive:  # the foot force at this step's start under the last torque
+                    block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG)
+            if any_drive:
+                drive_columns(X, PT, G, codes, n, TQ, FF, theta_d[k], theta_vel_d[k], step)
             block_solve(X, TQ, PT, n, FH, WK, FF, QDD, FLAG)
             block_integrate(X, PT, n, QDD)
         b = 0
@@ -113,4 +154,4 @@ def block_plan(substeps: np.ndarray, threads: int) -> list[np.ndarray]:
     return blocks
 
 
-__all__ = ["MAX_BLOCK", "block_plan", "run_block", "run_blocks"]
+__all__ = ["MAX_BLOCK", "block_plan", "drive_columns", "run_block", "run_blocks"]

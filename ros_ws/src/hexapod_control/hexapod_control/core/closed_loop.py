@@ -6,6 +6,14 @@ Per control tick k (period Delta t, ``p.substeps`` physics steps):
 The ROS graph does exactly the same across processes (sim node / controller node), with the
 same compiled functions, so a lockstep graph run reproduces these numbers.
 
+Any registered controller runs here (registry.py). PD-P, and PD-P&F with its force loop at
+the tick, take the compiled path (:func:`run_ticks`); PD-P&F with ``force_loop: drive`` a
+compiled loop around the drive (:func:`run_drive_ticks`). A plug-in's plain-Python law
+runs a per-tick Python loop around the compiled observe and drive (:func:`run_plugin_ticks`):
+obs_k = observe(state, T_acting); command = law(obs_k); the drive (hexapod_sim.core.drive)
+evaluates the command at every physics step of the period. A torque-only command gives the
+compiled path's numbers.
+
 Batch runs (:func:`run_batch`) execute many parameter sets at once: blocks of cases with the
 case index innermost (batch_loop.py), blocks in parallel; every case gets the numbers of its
 single run. A diverged case is reported as diverged, its samples are not used.
@@ -21,20 +29,45 @@ import numba
 from numba import njit
 
 from hexapod_sim.core.actuator import saturate
+from hexapod_sim.core.drive import C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, drive_advance
 from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
                                      scratch)
 from hexapod_common.core.gait import Reference, reference
-from hexapod_common.core.layout import OBS_SHAPE, P_L1, P_L2, P_TMAX, model_vector
+from hexapod_common.core.layout import (O_FF, O_TH, O_THV, O_TQ, OBS_SHAPE, P_L1, P_L2,
+                                        P_TMAX, model_vector)
 from hexapod_common.core.errors import ParameterError
-from hexapod_common.core.params import N_LEGS, HexapodParams
+from hexapod_common.core.params import (N_LEGS, HexapodParams, check_controller,
+                                        controller_group, controller_names)
 
+from . import registry
 from .batch_loop import MAX_BLOCK, block_plan, run_blocks
-from .controllers import control_law, controller_code, gain_vector
+from .controller_api import Observation
+from .builtin import PdPf
+from .controllers import (PD_P, PD_PF, PD_PF_DRIVE, control_law, controller_code,
+                          gain_vector)
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
-#: Parameter groups a run can change at a tick (those the model vector and gains hold).
+#: Parameter groups a run can change at a tick (those the model vector and gains hold);
+#: every registered controller's group too (:func:`changeable`).
 CHANGEABLE = ("ground.", "actuator.", "pd_p.", "pd_pf.")
+
+
+def changeable() -> tuple[str, ...]:
+    """Prefixes of the parameters a run can change at a tick: ground, actuator and every
+    registered controller's group."""
+    return ("ground.", "actuator.") + tuple(f"{controller_group(c)}."
+                                            for c in controller_names())
+
+
+def compiled_code(controller: str, p: HexapodParams) -> int | None:
+    """The compiled law of ``controller`` with parameters ``p``: PD_P, PD_PF (torque-only),
+    PD_PF_DRIVE (PD-P&F's force loop in the drive), or None (a plain-Python law)."""
+    if registry.is_compiled(controller, p):
+        return controller_code(controller)
+    if registry.load(controller) is PdPf:
+        return PD_PF_DRIVE
+    return None
 
 
 @njit(cache=True)
@@ -62,6 +95,55 @@ def run_ticks(s, P, code, gains, theta_d, theta_vel_d, torque, substeps, k0, obs
             cmd_out[r] = demand
         saturate(demand, t_max, torque)
         if not advance_prepared(s, torque, P, substeps, fh, work, ff, qdd):
+            return j
+    return n
+
+
+@njit(cache=True)
+def run_drive_ticks(s, P, gains, theta_d, theta_vel_d, torque, substeps, obs_out,  # type: ignore[no-untyped-def]
+                    cmd_out):
+    """PD-P&F with its force loop in the drive, compiled: per tick, observe, then the drive
+    holds kp = K_f Kp, kd = K_f Kd, k_force = K_f, setpoints the tick's references (the
+    numbers of builtin.PdPf.law through :func:`run_plugin_ticks`). ``gains``: (Kp1, Kd1,
+    Kp2, Kd2, K_f). Records obs_out[j], cmd_out[j] (the first step's T). Returns the ticks
+    completed."""
+    fh, work, ff, qdd = scratch()
+    cmd = np.zeros((6, N_LEGS, 2))
+    kf = gains[4]
+    n = theta_d.shape[0]
+    for j in range(n):
+        observe_prepared(s, torque, P, obs_out[j], fh, work, ff, qdd)
+        for i in range(N_LEGS):
+            for m in range(2):
+                cmd[C_QREF, i, m] = theta_d[j, i, m]
+                cmd[C_DQREF, i, m] = theta_vel_d[j, i, m]
+                cmd[C_KP, i, m] = kf * gains[2 * m]
+                cmd[C_KD, i, m] = kf * gains[2 * m + 1]
+                cmd[C_TFF, i, m] = 0.0
+                cmd[C_KF, i, m] = kf
+        if not drive_advance(s, cmd, P, substeps, fh, work, ff, qdd, cmd_out[j], torque):
+            return j
+    return n
+
+
+def run_plugin_ticks(s: np.ndarray, P: np.ndarray, ctrl: Any, theta_d: np.ndarray,
+                     theta_vel_d: np.ndarray, torque: np.ndarray, substeps: int, t0: float,
+                     period: float, obs_out: np.ndarray, cmd_out: np.ndarray) -> int:
+    """Run len(theta_d) ticks of controller instance ``ctrl`` (its ``law``) in place on
+    state ``s`` and the acting ``torque`` (6, 2), the first at time t0 (s), through the
+    drive. Records every tick's sample into obs_out[j] and the first physics step's
+    unsaturated torque into cmd_out[j]. Returns the number of ticks completed (less than
+    requested if the state diverged)."""
+    fh, work, ff, qdd = scratch()
+    n = int(theta_d.shape[0])
+    for j in range(n):
+        obs = obs_out[j]
+        observe_prepared(s, torque, P, obs, fh, work, ff, qdd)
+        raw = obs.copy()
+        o = Observation(t0 + j * period, raw[O_TH], raw[O_THV], raw[O_FF], theta_d[j].copy(),
+                        theta_vel_d[j].copy(), raw[O_TQ], raw)
+        cmd = ctrl.law(o).stacked()
+        if not drive_advance(s, cmd, P, substeps, fh, work, ff, qdd, cmd_out[j], torque):
             return j
     return n
 
@@ -136,8 +218,8 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
         param_changes: Sequence[tuple[float, Mapping[str, Any]]] = ()) -> RunResult:
     """One closed-loop run from the initial state; records every tick.
 
-    controller: 'pd_p' | 'pd_pf' (default p.run.controller); duration in s (default
-    p.run.duration). ``switches``: (time s, controller) hand-overs; the new controller
+    controller: any registered name or module:Class (default p.run.controller); duration
+    in s (default p.run.duration). ``switches``: (time s, controller) hand-overs; the new controller
     computes the command of the first tick at or after that time, as in the graph.
     ``param_changes``: (time s, {dotted name: value}) live changes (ground, actuator,
     gains); the first tick at or after that time is observed and integrated with them, as
@@ -151,14 +233,15 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     schedule = [(0, controller)] + sorted(
         (int(math.ceil(ts / p.sim.control_period - 1e-9)), c) for ts, c in switches)
     for _, c in schedule:
-        controller_code(c)
+        registry.load(check_controller(c))
     changes = sorted(((int(math.ceil(ts / p.sim.control_period - 1e-9)), dict(v))
                       for ts, v in param_changes), key=lambda c: c[0])
+    allowed = changeable()
     for _, values in changes:
         for name, value in values.items():
-            if not name.startswith(CHANGEABLE):
+            if not name.startswith(allowed):
                 raise ParameterError(name, value, "a change during a run only of "
-                                     + ", ".join(g + "*" for g in CHANGEABLE))
+                                     + ", ".join(g + "*" for g in allowed))
     params_at = [(0, p)]
     for k, values in changes:
         params_at.append((k, params_at[-1][1].with_values(**values)))
@@ -172,14 +255,30 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     diverged_at = None
     cuts = sorted({k for k, _ in schedule + params_at if 0 < k < n}
                   | set(range(0, n, BLOCK_TICKS)) | {n})
+    active: tuple[str, Any, Any] | None = None  # (name, its parameters, instance) in charge
     for k0, k1 in zip(cuts[:-1], cuts[1:]):
         who = [c for k, c in schedule if k <= k0][-1]
         cur = [q for k, q in params_at if k <= k0][-1]
         if k0 > 0 and any(k == k0 for k, _ in params_at):
             P = model_vector(cur)
-        done = run_ticks(s, P, controller_code(who), gain_vector(cur.gains(who)),
-                         ref.theta[k0:k1], ref.theta_vel[k0:k1], torque, p.substeps, k0,
-                         obs[k0:k1], cmd[k0:k1], k0)
+        code = compiled_code(who, cur)
+        if code in (PD_P, PD_PF):
+            active = None
+            done = run_ticks(s, P, code, gain_vector(cur.gains(who)),
+                             ref.theta[k0:k1], ref.theta_vel[k0:k1], torque, p.substeps, k0,
+                             obs[k0:k1], cmd[k0:k1], k0)
+        elif code == PD_PF_DRIVE:
+            active = None
+            done = run_drive_ticks(s, P, gain_vector(cur.gains(who)), ref.theta[k0:k1],
+                                   ref.theta_vel[k0:k1], torque, p.substeps, obs[k0:k1],
+                                   cmd[k0:k1])
+        else:
+            if active is None or active[0] != who or active[1] != cur.gains(who):
+                # takes charge (or its parameters changed): a fresh, reset instance
+                active = (who, cur.gains(who), registry.create(who, cur))
+            done = run_plugin_ticks(s, P, active[2], ref.theta[k0:k1], ref.theta_vel[k0:k1],
+                                    torque, p.substeps, float(t[k0]), p.sim.control_period,
+                                    obs[k0:k1], cmd[k0:k1])
         if progress is not None:
             progress(k0 + done, n)
         if done < k1 - k0:
@@ -200,6 +299,12 @@ class Case:
 
     params: HexapodParams
     controller: str
+
+
+def batch_code(case: Case) -> int | None:
+    """The compiled batch's code of ``case`` (PD_P, PD_PF, PD_PF_DRIVE), or None when its law
+    is plain Python (a plug-in: run one by one)."""
+    return compiled_code(case.controller, case.params)
 
 
 @dataclass(frozen=True)
@@ -241,10 +346,29 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     if not 0 <= k_a <= n:
         raise ParameterError("record_from", record_from, f"a time in [0, {duration:g}] s")
     t = np.arange(n + 1) * p0.sim.control_period
-    ref = reference(p0, t)
+    obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
+    ok = np.zeros(len(cases), dtype=np.bool_)
+    compiled = [batch_code(c) is not None for c in cases]
+    for j, c in enumerate(cases):  # plug-in laws: one run each
+        if not compiled[j]:
+            r = run(c.params, c.controller, duration)
+            obs[j] = r.obs[k_a:]
+            ok[j] = r.diverged_at is None
+    fast = [j for j, f in enumerate(compiled) if f]
+    if fast:
+        sub = _run_compiled_batch([cases[j] for j in fast], n, k_a, t)
+        obs[fast], ok[fast] = sub
+    window_ref = Reference(*(a[k_a:] for a in reference(p0, t)))
+    return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
+
+
+def _run_compiled_batch(cases: Sequence[Case], n: int, k_a: int,
+                        t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Samples (cases, n+1-k_a, 9, 6, 2) and ok flags of cases with a compiled law."""
+    ref = reference(cases[0].params, t)
     S = np.stack([initial_state(c.params) for c in cases])
     Ps = np.stack([model_vector(c.params) for c in cases])
-    codes = np.array([controller_code(c.controller) for c in cases], dtype=np.int64)
+    codes = np.array([batch_code(c) for c in cases], dtype=np.int64)
     G = np.stack([gain_vector(c.params.gains(c.controller)) for c in cases])
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
@@ -265,9 +389,10 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     block_substeps = np.array([substeps[b[0]] for b in blocks], dtype=np.int64)
     run_blocks(Xs, PTs, Cs, Gs, counts, ref.theta[:n], ref.theta_vel[:n], block_substeps, k_a,
                obs, cols, ok)
-    window_ref = Reference(*(a[k_a:] for a in ref))
-    return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
+    return obs, ok
 
 
-__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "run", "run_batch",
-           "run_ticks", "shared_reference_key", "tick_count"]
+__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "batch_code",
+           "changeable", "compiled_code", "run", "run_batch", "run_drive_ticks",
+           "run_plugin_ticks", "run_ticks",
+           "shared_reference_key", "tick_count"]

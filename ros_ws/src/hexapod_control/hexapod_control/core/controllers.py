@@ -16,15 +16,24 @@ from numba import njit
 
 from hexapod_common.core.kinematics import foot_force_torque
 from hexapod_common.core.layout import O_FF, O_TH, O_THV
+from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import CONTROLLERS, GainParams, check_controller
 
 #: Integer codes of the architectures inside compiled code, in the order of CONTROLLERS.
 PD_P, PD_PF = 0, 1
+#: Batch-only code: PD-P&F with its force loop in the drive (batch_loop evaluates the drive
+#: at every physics step; single runs use hexapod_sim.core.drive).
+PD_PF_DRIVE = 2
 
 
 def controller_code(name: str) -> int:
-    """'pd_p' -> PD_P, 'pd_pf' -> PD_PF (raises ParameterError otherwise)."""
-    return CONTROLLERS.index(check_controller(name))
+    """'pd_p' -> PD_P, 'pd_pf' -> PD_PF (raises ParameterError for any other name: only
+    the built-ins have a compiled law)."""
+    name = check_controller(name)
+    if name not in CONTROLLERS:
+        raise ParameterError("run.controller", name, "a controller with a compiled law (one "
+                             "of " + ", ".join(CONTROLLERS) + ")")
+    return CONTROLLERS.index(name)
 
 
 def gain_vector(g: GainParams) -> np.ndarray:
@@ -61,4 +70,5 @@ def control_law(code, gains, obs, theta_d, theta_vel_d, l1, l2, out):  # type: i
             theta_vel_d[i, 1], l1, l2)
 
 
-__all__ = ["PD_P", "PD_PF", "control_law", "controller_code", "gain_vector", "leg_demand"]
+__all__ = ["PD_P", "PD_PF", "PD_PF_DRIVE", "control_law", "controller_code", "gain_vector",
+           "leg_demand"]

@@ -16,6 +16,12 @@ Observation convention (used by the engine, the sim node and the analysis alike)
 at tick k holds the state at t_k and the torque *acting at that instant*, i.e. the held torque
 T_{k-1} applied over (t_{k-1}, t_k]; the hip force f_i is evaluated at the same state with the
 same torque. Index sums pair them over the window's samples 1..N (see indices.py).
+
+Drive commands (model.md "Drive interface"): drive.py holds a command per joint and
+evaluates it at every physics step with these same prepare/solve steps; its measured
+foot-force torque is that of F_RF at the step's start state under the previous step's
+torque (no algebraic loop; at a tick, the observation's foot force). Torque-only commands
+reproduce the held-torque numbers of :func:`advance_prepared` bit for bit.
 """
 from __future__ import annotations
 
