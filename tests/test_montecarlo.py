@@ -112,3 +112,44 @@ def test_cli_prints_intervals_and_writes_a_replayable_json(tmp_path):
     assert one.returncode == 0, one.stderr
     replay = json.loads(one.stdout)["runs"][0]
     assert replay == run
+
+
+def _result(diffs, base=0.05):
+    from hexapod_bringup.core.montecarlo import McRun, MonteCarloResult
+
+    runs = {"pd_p": [], "pd_pf": []}
+    for k, d in enumerate(diffs):
+        runs["pd_p"].append(McRun("pd_p", k, "ok", {"eps_xH": base, "eps_yH": 0.0}, {}))
+        runs["pd_pf"].append(McRun("pd_pf", k, "ok", {"eps_xH": base + d, "eps_yH": 0.0}, {}))
+    return MonteCarloResult(("pd_p", "pd_pf"), tuple(range(len(diffs))), 0.2, 1.0, 400.0, 3.0,
+                            runs)
+
+
+def test_e8_decides_the_winner_by_the_paired_interval_and_plans_seeds():
+    from hexapod_bringup.core.montecarlo import decide
+
+    better = decide(_result([-0.010, -0.012, -0.011, -0.009]), "pd_p", "pd_pf")
+    assert better.winner == "pd_pf" and better.difference.high < 0
+    worse = decide(_result([0.010, 0.012, 0.011, 0.009]), "pd_p", "pd_pf")
+    assert worse.winner == "pd_p"
+    noisy = decide(_result([-0.010, 0.012, -0.011, 0.005]), "pd_p", "pd_pf")
+    assert noisy.winner is None and noisy.seeds_needed > 4
+    # the planning figure: the smallest n with t_{n-1} s / sqrt(n) < |mean|
+    d = np.array([-0.010, 0.012, -0.011, 0.005])
+    s, m = np.std(d, ddof=1), abs(np.mean(d))
+    n = noisy.seeds_needed
+    assert t_quantile(0.975, n - 1) * s / math.sqrt(n) < m
+    assert t_quantile(0.975, n - 2) * s / math.sqrt(n - 1) >= m
+
+
+def test_cli_grid_of_grounds_and_spreads_compares_two_controllers():
+    out = _cli("--seeds", "2", "--ground", "100,300", "--spread", "25", "--t-run", "1.5",
+               "--backend", "inline", "--json", "-")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    assert [(q["ground_percent"], q["spread"]) for q in doc["points"]] == [(100.0, 0.25),
+                                                                        (300.0, 0.25)]
+    for q in doc["points"]:
+        assert q["winner"] in ("pd_p", "pd_pf", None) and len(q["runs"]) == 4
+    bad = _cli("--controllers", "pd_p", "--ground", "100,300", "--backend", "inline")
+    assert bad.returncode == 2 and "exactly two controllers" in bad.stderr

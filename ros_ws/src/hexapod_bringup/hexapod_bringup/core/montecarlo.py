@@ -167,5 +167,92 @@ def monte_carlo(p: HexapodParams, controllers: Sequence[str], seeds: Sequence[in
                             p.actuator.t_max, duration, runs, level)
 
 
-__all__ = ["MAX_REDRAWS", "McRun", "McTask", "MonteCarloResult", "monte_carlo", "run_task",
-           "simulate_on_ground"]
+# -- E8: which controller wins on uneven ground ---------------------------------------
+
+#: E8's deciding number: the hip errors eps_xH + eps_yH (m), E5's objective.
+HIP = ("eps_xH", "eps_yH")
+
+
+@dataclass(frozen=True)
+class Decision:
+    """E8 at one point: the paired difference of the hip errors (b - a, m), who wins
+    (the interval below 0: b; above: a; else None), and the seeds an interval excluding 0
+    would need if the mean and spread of the differences stayed as measured (a planning
+    figure, not a test: None if the mean difference is 0)."""
+
+    difference: Interval
+    winner: str | None
+    seeds_needed: int | None
+
+
+def hip_errors(res: MonteCarloResult, controller: str) -> np.ndarray:
+    """eps_xH + eps_yH of ``controller`` per seed (m; NaN where diverged)."""
+    return res.values(controller, HIP[0]) + res.values(controller, HIP[1])
+
+
+def decide(res: MonteCarloResult, a: str, b: str) -> Decision:
+    """Who has the lower hip errors on this ground, by the paired t interval of b - a."""
+    d = paired_interval(hip_errors(res, a), hip_errors(res, b), res.level)
+    winner = (b if d.high < 0.0 else a if d.low > 0.0 else None) if d.n >= 2 else None
+    needed: int | None = None
+    if d.n >= 2 and d.mean != 0.0:
+        from .stats import t_quantile
+
+        sd = d.half_width * math.sqrt(d.n) / t_quantile(0.5 + 0.5 * res.level, d.n - 1)
+        n = 2
+        while n < 100000 and t_quantile(0.5 + 0.5 * res.level, n - 1) * sd / math.sqrt(n) \
+                >= abs(d.mean):
+            n += 1
+        needed = n
+    return Decision(d, winner, needed)
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One E8 point: nominal ground (% of base), spread (sigma of ln factor), T_max (N m)."""
+
+    ground_percent: float
+    spread: float
+    t_max: float
+    result: MonteCarloResult
+
+
+def monte_carlo_grid(p: HexapodParams, controllers: Sequence[str], seeds: Sequence[int],
+                     ground_percents: Sequence[float], spreads: Sequence[float],
+                     t_max_values: Sequence[float], duration: float | None = None,
+                     backend: Backend | None = None,
+                     progress: Callable[[int], None] | None = None,
+                     level: float = 0.95) -> list[GridPoint]:
+    """E8: :func:`monte_carlo` at every (ground %, spread, T_max), all runs in one pass
+    over the backend (the same seeds, hence the same ground sequences, at every point)."""
+    seeds = [check_seed(s, "seed") for s in seeds]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError("seeds must be distinct")
+    if not controllers:
+        raise ValueError("at least one controller")
+    duration = p.run.duration if duration is None else duration
+    points = [(float(g), check_spread(s), float(t)) for t in t_max_values
+              for g in ground_percents for s in spreads]
+    tasks = []
+    for g, s, t in points:
+        q = p.with_values(**{"ground.scale": g / 100.0, "actuator.t_max": t})
+        tasks += [McTask(q, c, k, s, duration) for c in controllers for k in seeds]
+    out: list[McRun | None] = [None] * len(tasks)
+    for k, r in (backend or InlineBackend()).calls(run_task, tasks):
+        out[k] = r
+        if progress is not None:
+            progress(1)
+    done = [r for r in out if r is not None]
+    n, per = len(seeds), len(seeds) * len(controllers)
+    grid = []
+    for j, (g, s, t) in enumerate(points):
+        block = done[j * per:(j + 1) * per]
+        runs = {c: block[i * n:(i + 1) * n] for i, c in enumerate(controllers)}
+        grid.append(GridPoint(g, s, t, MonteCarloResult(
+            tuple(controllers), tuple(seeds), s, g / 100.0, t, duration, runs, level)))
+    return grid
+
+
+__all__ = ["Decision", "GridPoint", "HIP", "MAX_REDRAWS", "McRun", "McTask",
+           "MonteCarloResult", "decide", "hip_errors", "monte_carlo", "monte_carlo_grid",
+           "run_task", "simulate_on_ground"]
