@@ -187,7 +187,8 @@ class Decision:
 
 def hip_errors(res: MonteCarloResult, controller: str) -> np.ndarray:
     """eps_xH + eps_yH of ``controller`` per seed (m; NaN where diverged)."""
-    return res.values(controller, HIP[0]) + res.values(controller, HIP[1])
+    total: np.ndarray = res.values(controller, HIP[0]) + res.values(controller, HIP[1])
+    return total
 
 
 def decide(res: MonteCarloResult, a: str, b: str) -> Decision:
