@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +102,12 @@ def test_sweep_and_monte_carlo_on_a_real_cluster_equal_the_pool_even_if_a_worker
     try:
         on_dask = ground_sweep(p, PERCENTS, 400.0, backend=backend,
                                progress=kill_a_busy_worker)
+        # the scheduler saw the worker go (its tasks were rerun on the other one)
+        deadline = time.monotonic() + 15.0
+        while len(watcher.scheduler_info()["workers"]) > 1 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        alive = [w["name"] for w in watcher.scheduler_info()["workers"].values()]
+        assert killed and alive == [n for n in workers if n not in killed]
     finally:
         backend.close()
         watcher.close()
