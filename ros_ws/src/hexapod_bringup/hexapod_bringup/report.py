@@ -54,6 +54,11 @@ class Plan:
     rate_percents: tuple[float, ...] = (10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0,
                                         1000.0)
     rate_t_max: tuple[float, ...] = (400.0, 170.0)
+    e8_percents: tuple[float, ...] = (50.0, 100.0, 200.0, 500.0)
+    e8_spreads: tuple[float, ...] = (0.0, 20.0, 50.0)
+    e8_t_max: tuple[float, ...] = (400.0, 170.0)
+    e8_seeds: int = 10
+    cmaes_budget: int = 62
 
     @staticmethod
     def quick() -> "Plan":
@@ -61,7 +66,9 @@ class Plan:
         return Plan(ground_percents=(10.0, 100.0, 1000.0), t_max_values=(150.0, 400.0),
                     ideal_percents=(100.0, 500.0), tune_factors=(0.75, 1.0),
                     kp1_values=(20000.0, 100000.0), rates=(1000.0, 10000.0),
-                    rate_percents=(100.0, 300.0), rate_t_max=(400.0,))
+                    rate_percents=(100.0, 300.0), rate_t_max=(400.0,),
+                    e8_percents=(100.0, 500.0), e8_spreads=(0.0, 30.0), e8_t_max=(400.0,),
+                    e8_seeds=3, cmaes_budget=16)
 
 
 def _no_progress(label: str, total: int) -> Callable[[int], None]:
@@ -535,6 +542,13 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
               f"Best Kp1 = **{kp1.best['kp1']:.6g}** (score {kp1.best_score:.4g} m; the params "
               f"file's {kp1.reference['kp1']:.6g} scores {kp1.reference_score:.4g} m).", ""]
 
+    from .report_research import cmaes_section, e8_section
+
+    cma_md, cma_doc = cmaes_section(p400, tunes, plan.cmaes_budget, backend, progress)
+    e5_md += cma_md
+    e8_md, e8_doc = e8_section(p400, plan.e8_percents, plan.e8_spreads, plan.e8_t_max,
+                               plan.e8_seeds, backend, progress)
+
     # Claims --------------------------------------------------------------------------
     sweep_pts = {t: _sweep_points(res) for t, res in sweeps.items()}
     ideal_by_scale = {float(v): {c: ideal_pts[c][k] for c in CONTROLLERS}
@@ -551,7 +565,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     claims_md += [f"| {v.claim} | {v.statement} | **{v.status}** | {v.rule} | {v.evidence} |"
                   for v in verdicts]
     claims_md += [""] + [_why(v) for v in verdicts if v.status != claims.HOLDS] + [""]
-    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md
+    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md + e8_md
     (out / "README.md").write_text("\n".join(md) + "\n")
 
     def conv_doc(cv: Convergence) -> dict[str, object]:
@@ -574,7 +588,8 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                       for c, t in tunes.items()},
            "pd_p_kp1": {"values": list(plan.kp1_values),
                         "scores": [None if math.isnan(s) else s for s in kp1.scores],
-                        "best": kp1.best["kp1"]}}
+                        "best": kp1.best["kp1"]},
+           "tuning_cmaes": cma_doc, "e8": e8_doc}
     (out / "results.json").write_text(json.dumps(doc, indent=2, default=float))
     return verdicts
 
