@@ -223,7 +223,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     from .cmd_experiments import _backend_args
 
     p = sub.add_parser("montecarlo", help="controllers on uneven ground over N seeds: means, "
-                       "95 %% intervals, paired differences")
+                       "95 %% intervals, paired differences",
+                       description="Each index's mean over the seeds with a 95 %% Student t "
+                       "interval; each controller's paired difference to the first with a "
+                       "paired Student t interval over the same seeds (common random "
+                       "numbers: seed k gives every controller the same ground).")
     params_arguments(p)
     p.add_argument("--controllers", default="pd_p,pd_pf",
                    help=f"comma list of {', '.join(CONTROLLERS)} (the first is the baseline "
