@@ -224,7 +224,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
 
     p = sub.add_parser("montecarlo", help="controllers on uneven ground over N seeds: means, "
                        "95 %% intervals, paired differences",
-                       description="Each index's mean over the seeds with a 95 %% Student t "
+                       description="Each index's mean over the seeds with a 95 % Student t "
                        "interval; each controller's paired difference to the first with a "
                        "paired Student t interval over the same seeds (common random "
                        "numbers: seed k gives every controller the same ground).")
