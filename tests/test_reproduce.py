@@ -40,6 +40,12 @@ def test_reproduce_quick_writes_report_with_all_claims(tmp_path):
     assert "dt/2→dt/4" in text and "dt convergence:" in text
     assert "## E6" in text and "**Answer.**" in text
     assert doc["control_rate_hz"] == 10000.0
+    # E8 (uneven ground, intervals) and E5 by CMA-ES next to the grid
+    assert "## E8" in text and "### E5 by CMA-ES" in text
+    assert len(doc["e8"]["points"]) == 4 and doc["e8"]["seeds"] == 3
+    for c in ("pd_p", "pd_pf"):
+        cma = doc["tuning_cmaes"][c]
+        assert cma["cmaes_runs"] <= 16 and cma["grid_best"] == doc["tuning"][c]["score"]
     for n in list(range(4, 18)):
         assert list(out.glob(f"fig{n:02d}_*.png")), f"figure {n} missing"
     assert list(out.glob("fig_e6_map_tmax400.png")) and list(out.glob("fig_e6_eps_xH_*.png"))

@@ -20,7 +20,7 @@ from .cli_args import OneLineParser, param_value, params_arguments, params_from_
 #: so that a partial install still offers what it has.
 COMMAND_MODULES = ("hexapod_bringup.cmd_graph", "hexapod_bringup.cmd_experiments",
                    "hexapod_bringup.cmd_analyze", "hexapod_bringup.animation",
-                   "hexapod_bringup.cmd_controllers")
+                   "hexapod_bringup.cmd_controllers", "hexapod_bringup.cmd_montecarlo")
 #: Subcommands that talk to a running graph: parsed and run by cmd_graph alone, without
 #: importing the engine, numba and the plots (a second of CPU that a realtime graph on the
 #: same cores would feel).

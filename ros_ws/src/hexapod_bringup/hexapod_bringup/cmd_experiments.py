@@ -158,6 +158,10 @@ def _cmd_tune(args: argparse.Namespace) -> int:
     from .core.experiments import default_grid, tune
 
     controller_list(args.controller)
+    if args.method == "cmaes":
+        from .cmd_cmaes import tune_cmaes_command
+
+        return tune_cmaes_command(args, _backend(args), progress_factory)
     p = params_from_args(args)
     grid = default_grid(p, args.controller, _floats(args.factors, "--factors"))
     for item in args.grid:
@@ -228,9 +232,19 @@ COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt,
         _opt("--json", help="write the three runs and the verdicts to this file"),
         _opt("--strict", action="store_true",
              help="exit with code 1 if a controller's indices are not converged"))),
-    ("tune", "brute-force gain search (E5)", _cmd_tune, (
+    ("tune", "gain search (E5): brute-force grid, or CMA-ES", _cmd_tune, (
         _opt("--controller", required=True,
              help="a registered controller or module:Class whose gains kp1..kd2 to tune"),
+        _opt("--method", choices=["grid", "cmaes"], default="grid",
+             help="grid (default: every set of --factors/--grid) or cmaes (CMA-ES over "
+             "log factors of the params file's gains, at most --budget runs)"),
+        _opt("--budget", type=int, default=62,
+             help="cmaes: at most this many evaluations (default 62, a tenth of the "
+             "default grid's 625 sets)"),
+        _opt("--gains", default="kp1,kd1,kp2,kd2", help="cmaes: the gains searched"),
+        _opt("--sigma0", type=float, default=0.8,
+             help="cmaes: initial step in ln(gain) (default 0.8, about x/÷ 2.2)"),
+        _opt("--seed", type=int, default=1, help="cmaes: seed of the search (default 1)"),
         _opt("--factors", default="0.5,0.75,1,1.5,2",
              help="default grid: each gain of the params file times these factors"),
         _opt("--grid", action="append", default=[], metavar="GAIN=VALUES",

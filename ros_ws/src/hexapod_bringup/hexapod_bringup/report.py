@@ -14,7 +14,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -30,7 +30,8 @@ from .core.experiments import (RateResult, SweepResult, TuneResult, ground_sweep
                                rate_experiment, t_max_sweep, tune)
 from hexapod_metrics.core.indices import INDEX_NAMES, INDEX_UNITS, REPORTED_NAMES
 from .core.parallel import Backend
-from .core.simulate import Simulation, simulate
+from .core.simulate import Simulation, simulate, window_ticks
+from hexapod_metrics.core.impacts import impact_torque
 
 ProgressFactory = Callable[[str, int], Callable[[int], None]]
 RUNS = len(REFINEMENTS)  # runs per checked point
@@ -53,6 +54,11 @@ class Plan:
     rate_percents: tuple[float, ...] = (10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0,
                                         1000.0)
     rate_t_max: tuple[float, ...] = (400.0, 170.0)
+    e8_percents: tuple[float, ...] = (50.0, 100.0, 200.0, 500.0)
+    e8_spreads: tuple[float, ...] = (0.0, 20.0, 50.0)
+    e8_t_max: tuple[float, ...] = (400.0, 170.0)
+    e8_seeds: int = 10
+    cmaes_budget: int = 62
 
     @staticmethod
     def quick() -> "Plan":
@@ -60,7 +66,9 @@ class Plan:
         return Plan(ground_percents=(10.0, 100.0, 1000.0), t_max_values=(150.0, 400.0),
                     ideal_percents=(100.0, 500.0), tune_factors=(0.75, 1.0),
                     kp1_values=(20000.0, 100000.0), rates=(1000.0, 10000.0),
-                    rate_percents=(100.0, 300.0), rate_t_max=(400.0,))
+                    rate_percents=(100.0, 300.0), rate_t_max=(400.0,),
+                    e8_percents=(100.0, 500.0), e8_spreads=(0.0, 30.0), e8_t_max=(400.0,),
+                    e8_seeds=3, cmaes_budget=16)
 
 
 def _no_progress(label: str, total: int) -> Callable[[int], None]:
@@ -72,19 +80,39 @@ def _max_torque_step(sim: Simulation) -> float:
     return float(np.nanmax(np.abs(np.diff(tq, axis=0)))) if sim.indices else math.nan
 
 
-def _simulate_job(job: tuple[Case, bool]) -> tuple[float, Simulation | None]:
-    """One single run on a backend worker: (its largest torque step, the whole run if
-    ``keep`` else None: a run's time series are large, most jobs need only the step)."""
+def _impact_peak(sim: Simulation) -> float:
+    """Impact torque of a run (impacts.py: mean peak |T_m| within 20 ms after each gait
+    touchdown of the evaluation window, N m); NaN if it diverged."""
+    if sim.indices is None:
+        return math.nan
+    p = sim.outcome.case.params
+    k_a, k_b = window_ticks(p, float(sim.run.t[-1]))
+    t_t = p.cycle_time * (1.0 - p.gait.duty_factor)
+    return impact_torque(sim.run.obs, sim.run.reference.support, p.sim.control_period, t_t,
+                         k_a, k_b).peak
+
+
+class RunNumbers(NamedTuple):
+    """The torque numbers of one single run (N m): largest tick-to-tick step, impact peak."""
+
+    step: float
+    impact: float
+
+
+def _simulate_job(job: tuple[Case, bool]) -> tuple[RunNumbers, Simulation | None]:
+    """One single run on a backend worker: (its torque numbers, the whole run if ``keep``
+    else None: a run's time series are large, most jobs need only the numbers)."""
     case, keep = job
     sim = simulate(case.params, case.controller)
-    return _max_torque_step(sim), (sim if keep else None)
+    return RunNumbers(_max_torque_step(sim), _impact_peak(sim)), (sim if keep else None)
 
 
 def _single_runs(jobs: Sequence[tuple[Case, bool]], backend: Backend,
-                 tick: Callable[[int], None]) -> list[tuple[float, Simulation | None]]:
+                 tick: Callable[[int], None]) -> list[tuple[RunNumbers, Simulation | None]]:
     """:func:`_simulate_job` of every job on ``backend`` (spread like the batches), in order;
     ``tick(1)`` per finished run."""
-    out: list[tuple[float, Simulation | None]] = [(math.nan, None)] * len(jobs)
+    out: list[tuple[RunNumbers, Simulation | None]] = [
+        (RunNumbers(math.nan, math.nan), None)] * len(jobs)
     for k, res in backend.calls(_simulate_job, jobs):
         out[k] = res
         tick(1)
@@ -415,6 +443,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                          progress=progress("E4 ideal actuators (runs)", n))
     _write_rows(out / "e4_ideal_actuators.csv", ideal.rows())
     steps: dict[float, dict[str, Measured]] = {}
+    impacts: dict[float, dict[str, Measured]] = {}
     hard_sims, hard_fine = {}, {}
     tick = progress("E4 torque impulses (runs)", n)
     jobs = [(Case(refined(p.with_values(**{"actuator.t_max": math.inf,
@@ -423,31 +452,36 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
             for pct in plan.ideal_percents for c in CONTROLLERS for f in REFINEMENTS]
     e4_runs = iter(_single_runs(jobs, backend, tick))
     for pct in plan.ideal_percents:
-        steps[pct / 100.0] = {}
+        steps[pct / 100.0], impacts[pct / 100.0] = {}, {}
         for c in CONTROLLERS:
             got = [next(e4_runs) for _ in REFINEMENTS]
-            vals = [v for v, _ in got]
             sims = [s for _, s in got]
-            finite = [v for v in vals if not math.isnan(v)]
-            ok = len(finite) == len(vals) and abs(vals[1] - vals[2]) < 0.01 * abs(vals[2])
-            steps[pct / 100.0][c] = Measured(vals[0], min(finite, default=math.nan),
-                                             max(finite, default=math.nan), ok)
+            for table, vals in ((steps, [v.step for v, _ in got]),
+                                (impacts, [v.impact for v, _ in got])):
+                finite = [v for v in vals if not math.isnan(v)]
+                ok = len(finite) == len(vals) and abs(vals[1] - vals[2]) < 0.01 * abs(vals[2])
+                table[pct / 100.0][c] = Measured(vals[0], min(finite, default=math.nan),
+                                                 max(finite, default=math.nan), ok)
             if pct == plan.ideal_plot_percent:
                 hard_sims[c], hard_fine[c] = sims[0], sims[-1]
     ideal_pts = _sweep_points(ideal)
     e4_md = ["## E4: ideal actuators (T_max → ∞) on harder ground", "",
              "| ground % | " + " | ".join(f"{plots.label(c)} eps_xH+eps_yH (m) | "
-                                          f"{plots.label(c)} max torque step (N m)"
+                                          f"{plots.label(c)} max torque step (N m) | "
+                                          f"{plots.label(c)} impact torque (N m)"
                                           for c in CONTROLLERS) + " |",
-             "|---|" + "---|---|" * len(CONTROLLERS)]
+             "|---|" + "---|---|---|" * len(CONTROLLERS)]
     for k, pct in enumerate(plan.ideal_percents):
         cells = []
         for c in CONTROLLERS:
             e = claims.total([ideal_pts[c][k]["eps_xH"], ideal_pts[c][k]["eps_yH"]])
-            cells += [_cell(e), _cell(steps[pct / 100.0][c])]
+            cells += [_cell(e), _cell(steps[pct / 100.0][c]), _cell(impacts[pct / 100.0][c])]
         e4_md.append(f"| {pct:g} | " + " | ".join(cells) + " |")
     e4_md += ["", "The torque step is the largest change of a joint torque from one control "
-              "tick to the next; † as above (1 % from dt/2 to dt/4)."]
+              "tick to the next (a difference of samples: it grows as dt resolves the "
+              "impacts); the impact torque is the peak |T_m| of the landing leg within 20 ms "
+              "after each touchdown, averaged over the touchdowns of the evaluation window "
+              "(it decides C4); † as above (1 % from dt/2 to dt/4)."]
     if hard_sims:
         conv_hard = {c: ideal.convergence[c][list(plan.ideal_percents).index(  # type: ignore[index]
             plan.ideal_plot_percent)] for c in CONTROLLERS}
@@ -500,6 +534,13 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
               f"Best Kp1 = **{kp1.best['kp1']:.6g}** (score {kp1.best_score:.4g} m; the params "
               f"file's {kp1.reference['kp1']:.6g} scores {kp1.reference_score:.4g} m).", ""]
 
+    from .report_research import cmaes_section, e8_section
+
+    cma_md, cma_doc = cmaes_section(p400, tunes, plan.cmaes_budget, backend, progress)
+    e5_md += cma_md
+    e8_md, e8_doc = e8_section(p400, plan.e8_percents, plan.e8_spreads, plan.e8_t_max,
+                               plan.e8_seeds, backend, progress)
+
     # Claims --------------------------------------------------------------------------
     sweep_pts = {t: _sweep_points(res) for t, res in sweeps.items()}
     ideal_by_scale = {float(v): {c: ideal_pts[c][k] for c in CONTROLLERS}
@@ -507,7 +548,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     verdicts = [claims.c1(base_pts["pd_p"], base_pts["pd_pf"]),
                 claims.c2(sweep_pts, list(sweeps[400.0].values)),
                 claims.c3(strong_pts, base_pts, plan.strong_t_max),
-                claims.c4(ideal_by_scale, steps)]
+                claims.c4(ideal_by_scale, steps, impacts)]
     claims_md = ["## The paper's claims in our model", "",
                  f"Decided at {_hz(rate)} control, every deciding number checked at dt/2 and "
                  "dt/4. *Undecided* means a deciding number is not dt-converged or the margin "
@@ -517,7 +558,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                   for v in verdicts]
     claims_md += ["", "The numbers behind each verdict: `results.json` (`claims[].evidence`)."]
     claims_md += [""] + [_why(v) for v in verdicts if v.status != claims.HOLDS] + [""]
-    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md
+    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md + e8_md
     (out / "README.md").write_text("\n".join(md) + "\n")
 
     def conv_doc(cv: Convergence) -> dict[str, object]:
@@ -540,7 +581,8 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                       for c, t in tunes.items()},
            "pd_p_kp1": {"values": list(plan.kp1_values),
                         "scores": [None if math.isnan(s) else s for s in kp1.scores],
-                        "best": kp1.best["kp1"]}}
+                        "best": kp1.best["kp1"]},
+           "tuning_cmaes": cma_doc, "e8": e8_doc}
     (out / "results.json").write_text(json.dumps(doc, indent=2, default=float))
     return verdicts
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from hexapod_control.core.closed_loop import Case, RunResult, run, run_batch, tick_count
 from hexapod_common.core.params import HexapodParams
+from hexapod_sim.core.uneven_ground import GroundDraws
 
 from hexapod_metrics.core.indices import Indices, evaluation_window, indices_from_obs
 
@@ -57,15 +58,17 @@ def window_ticks(p: HexapodParams, duration: float) -> tuple[int, int]:
 def simulate(p: HexapodParams, controller: str | None = None, duration: float | None = None,
              progress: Callable[[int, int], None] | None = None,
              switches: Sequence[tuple[float, str]] = (),
-             param_changes: Sequence[tuple[float, Mapping[str, Any]]] = ()) -> Simulation:
+             param_changes: Sequence[tuple[float, Mapping[str, Any]]] = (),
+             ground: GroundDraws | None = None) -> Simulation:
     """Run one case in process and compute the indices of its evaluation window.
 
     ``switches``: (time s, controller) hand-overs during the run, ``param_changes``: (time
-    s, {name: value}) live parameter changes (see closed_loop.run)."""
+    s, {name: value}) live parameter changes, ``ground``: uneven ground draws (see
+    closed_loop.run; montecarlo.simulate_on_ground draws them from a seed)."""
     controller = controller or p.run.controller
     duration = p.run.duration if duration is None else duration
     k_a, k_b = window_ticks(p, duration)
-    r = run(p, controller, duration, progress, switches, param_changes)
+    r = run(p, controller, duration, progress, switches, param_changes, ground)
     window = (float(r.t[k_a]), float(r.t[k_b]))
     case = Case(p, controller)
     if r.diverged_at is not None:

@@ -5,6 +5,7 @@ State vector ``s`` (float64, length :data:`STATE_SIZE`):
     s[V0:V0+24]   dq = their time derivatives
     s[C0:C0+6]    1.0 while foot i is in contact, else 0.0
     s[X0:X0+6]    stored touchdown point x_0 of foot i (m), valid while in contact
+    (optional tail beyond STATE_SIZE: uneven ground, see hexapod_sim/core/uneven_ground.py)
 
 Model vector ``P`` (float64, length :data:`MODEL_SIZE`): the physical parameters in SI units,
 effective ground values (base x scale), the integrator flag and the nominal hip offsets.

@@ -32,6 +32,7 @@ from hexapod_sim.core.actuator import saturate
 from hexapod_sim.core.drive import C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, drive_advance
 from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
                                      scratch)
+from hexapod_sim.core.uneven_ground import GroundDraws, GroundRecord, touchdowns
 from hexapod_common.core.gait import Reference, reference
 from hexapod_common.core.layout import (O_FF, O_TH, O_THV, O_TQ, OBS_SHAPE, P_L1, P_L2,
                                         P_TMAX, model_vector)
@@ -167,6 +168,8 @@ class RunResult:
     diverged_at: float | None = None
     switches: tuple[tuple[int, str], ...] = ()
     param_changes: tuple[tuple[int, dict[str, Any]], ...] = ()
+    #: uneven ground (uneven_ground.py): the draws and each foot's touchdowns; None if uniform
+    ground: GroundRecord | None = None
 
     def controller_at(self, k: int) -> str:
         """Controller that computed the command of tick k."""
@@ -215,7 +218,8 @@ def check_fits_in_memory(p: HexapodParams, duration: float, n: int) -> None:
 def run(p: HexapodParams, controller: str | None = None, duration: float | None = None,
         progress: Callable[[int, int], None] | None = None,
         switches: Sequence[tuple[float, str]] = (),
-        param_changes: Sequence[tuple[float, Mapping[str, Any]]] = ()) -> RunResult:
+        param_changes: Sequence[tuple[float, Mapping[str, Any]]] = (),
+        ground: GroundDraws | None = None) -> RunResult:
     """One closed-loop run from the initial state; records every tick.
 
     controller: any registered name or module:Class (default p.run.controller); duration
@@ -225,6 +229,9 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     gains); the first tick at or after that time is observed and integrated with them, as
     the sim applies a change at the next tick boundary.
     ``progress(done, total)`` is called after every block of ticks.
+    ``ground``: uneven ground, each foot's factors drawn per touchdown (uneven_ground.py);
+    the result's ``ground`` records the factors used (check ``overflowed``: a foot touched
+    down more often than pairs were drawn).
     """
     controller = controller or p.run.controller
     duration = p.run.duration if duration is None else duration
@@ -248,7 +255,7 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
     t = np.arange(n + 1) * p.sim.control_period
     ref = reference(p, t)
     P = model_vector(p)
-    s = initial_state(p)
+    s = initial_state(p) if ground is None else ground.attach(initial_state(p))
     torque = np.zeros((N_LEGS, 2))
     obs = np.full((n + 1,) + OBS_SHAPE, np.nan)
     cmd = np.full((n, N_LEGS, 2), np.nan)
@@ -289,8 +296,10 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
             P = model_vector([q for k, q in params_at if k <= n][-1])
         observe(s, torque, P, obs[n])
     applied = tuple((k, c) for k, c in schedule if k < n)
+    record = None if ground is None else GroundRecord(ground, tuple(int(c) for c in
+                                                                    touchdowns(s)))
     return RunResult(p, controller, t, obs, cmd, ref, diverged_at, applied,
-                     tuple((k, v) for k, v in changes if k <= n))
+                     tuple((k, v) for k, v in changes if k <= n), record)
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from numba import njit
 from .body import body_forces
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
+from .uneven_ground import ground_factors, note_touchdown
 from hexapod_common.core.errors import DivergenceError
 from hexapod_common.core.gait import reference
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
@@ -78,13 +79,15 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
         dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
         x, y = q[i, 0] + dx, q[i, 1] + dy
         c, xt = update_contact(x, y, s[C0 + i], s[X0 + i])
+        note_touchdown(s, i, s[C0 + i], c)
         s[C0 + i] = c
         s[X0 + i] = xt
         if c != 0.0:
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
             vx, vy = dq[i, 0] + dvx, dq[i, 1] + dvy
-            bx, by = P[P_BGX], P[P_BGY]
-            fx, fy = spring_damper(x, y, vx, vy, xt, P[P_KGX], P[P_KGY], bx, by)
+            gx, gy = ground_factors(s, i)  # 1.0 on uniform ground (uneven_ground.py)
+            bx, by = P[P_BGX] * gx, P[P_BGY] * gy
+            fx, fy = spring_damper(x, y, vx, vy, xt, P[P_KGX] * gx, P[P_KGY] * gy, bx, by)
             factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, P[P_MH],
                                               P[P_MK], P[P_MF], P[P_G], bx, by, h)
         else:
@@ -103,13 +106,14 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, error_model="numpy")
 def leg_contact_solve(factor, bias, jac, c1, s1, c12, s12, w1, w2, P,  # type: ignore[no-untyped-def]
-                      tm1, tm2, fhx, fhy, fx, fy, h):
+                      tm1, tm2, fhx, fhy, fx, fy, h, bx, by):
     """Accelerations of a leg whose foot is in contact, and the ground force it feels.
 
     factor, bias, jac: the leg's state part (dynamics.leg_system_cs, with the ground damping
     over h); c1, s1, c12, s12: cos/sin of theta1 and theta1 + theta2; (fx, fy): the ground
-    force at the current velocity (N). The damping terms act at the velocity at the end of
-    the step of length h (h = 0: the current velocity, i.e. plain semi-implicit Euler). The
+    force at the current velocity (N); (bx, by): the ground dampers at this foot (N s/m,
+    uneven_ground.py). The damping terms act at the velocity at the end of the step of
+    length h (h = 0: the current velocity, i.e. plain semi-implicit Euler). The
     force is then limited ("the ground never pulls"; Coulomb if mu > 0) and, if a limit
     applies, the leg is solved again with the limited force held fixed.
     Returns (ddx_H, ddy_H, ddth1, ddth2, F_x, F_y).
@@ -120,8 +124,8 @@ def leg_contact_solve(factor, bias, jac, c1, s1, c12, s12, w1, w2, P,  # type: i
         af, bf, ja2, jb2 = jac
         dvx = h * (a0 + af * a2 + ja2 * a3)
         dvy = h * (a1 + bf * a2 + jb2 * a3)
-        fx -= P[P_BGX] * dvx
-        fy -= P[P_BGY] * dvy
+        fx -= bx * dvx
+        fy -= by * dvy
     lx, ly = limit_force(fx, fy, P[P_MU])
     if lx != fx or ly != fy:
         a0, a1, a2, a3 = leg_accel_cs(c1, s1, c12, s12, w1, w2, P[P_L1], P[P_L2], P[P_MH],
@@ -141,10 +145,11 @@ def solve(s, torque, P, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
         bias = (w[W_BIAS], w[W_BIAS + 1], w[W_BIAS + 2], w[W_BIAS + 3])
         jac = (w[W_JAC], w[W_JAC + 1], w[W_JAC + 2], w[W_JAC + 3])
         if s[C0 + i] != 0.0:
+            gx, gy = ground_factors(s, i)
             a0, a1, a2, a3, fx, fy = leg_contact_solve(
                 factor, bias, jac, w[W_CS], w[W_CS + 1], w[W_CS + 2], w[W_CS + 3], w[W_W],
                 w[W_W + 1], P, torque[i, 0], torque[i, 1], fh[i, 0], fh[i, 1], w[W_FG],
-                w[W_FG + 1], h)
+                w[W_FG + 1], h, P[P_BGX] * gx, P[P_BGY] * gy)
         else:
             fx, fy = 0.0, 0.0
             a0, a1, a2, a3 = leg_solve(factor, bias, jac, torque[i, 0], torque[i, 1],
