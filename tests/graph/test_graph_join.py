@@ -300,3 +300,43 @@ def test_joined_controller_death_holds_falls_back_and_exits_7(join_script, tmp_p
     code = stop(s)
     assert code == EXIT_CODES["fallback"], (code, s.stderr())
     assert "fallback episode(s)" in s.stderr(), s.stderr()
+
+
+def test_joined_pd_law_in_charge_from_tick_0_equals_the_engines_pd_p(make_graph, tmp_path):
+    """The example's law with PD-P's gains is PD-P (K_f = 1): a lockstep run with it in
+    charge from tick 0 equals the in-process engine's PD-P run, tick for tick."""
+    import numpy as np
+
+    from hexapod_control.core.closed_loop import run
+    from hexapod_metrics.bag import read_joint_state_arrays
+
+    from .conftest import fast_params
+
+    duration, bag = 2.0, tmp_path / "bag"
+    g = make_graph()
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    out = open(tmp_path / "my_controller.out", "wb")
+    node = subprocess.Popen([str(EXAMPLE)], env=g.env, stdout=out, stderr=subprocess.STDOUT)
+    try:
+        g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+                "run.controller:=my_controller",
+                "wait_for:=trajectory_generator,my_controller,metrics")
+        assert g.wait_exit("hexapod_sim", 300) == 0, g.log("hexapod_sim")
+    finally:
+        node.send_signal(signal.SIGINT)
+        node.wait(30)
+    g.stop_all(order=("trajectory_generator", "metrics"))
+    assert "0 missed" in g.log("hexapod_sim")
+
+    ref = run(fast_params(), "pd_p", duration)
+    n = ref.obs.shape[0]
+    with open_bag(bag) as b:
+        cols = {}
+        for topic in T.STATE_TOPICS:
+            a = read_joint_state_arrays(b, topic)
+            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
+            cols[topic] = (a.position, a.velocity, a.effort)
+        cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
+    assert np.array_equal(T.obs_from_columns(cols), ref.obs)
+    assert np.array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)
