@@ -34,8 +34,8 @@ CYCLE_S = 1.0  # gait cycle of the base case (s): a segment is scored over its f
 
 #: A controller node written from docs/controllers.md only: the topics, the stamp rule, the
 #: frame_id rule and the trailer (BLAKE2b-128 with the key file's 32 bytes, topic NUL payload
-#: padding sender sequence). UNSIGNED=1: no trailer, and it answers every state (a careless
-#: node), so its commands reach the sim while another controller is in charge.
+#: padding sender sequence). UNSIGNED=1: no trailer; ANSWER_ALL=1: it answers every state (a
+#: careless node), so its commands reach the sim while another controller is in charge.
 SPEC_NODE = r'''
 import hashlib, os, secrets, struct, sys
 import rclpy
@@ -45,6 +45,7 @@ from sensor_msgs.msg import JointState
 
 NAME = sys.argv[1]
 UNSIGNED = os.environ.get("UNSIGNED") == "1"
+ANSWER_ALL = os.environ.get("ANSWER_ALL") == "1"
 TOPIC = "/hexapod/joint_commands"
 JOINTS = [f"leg{i}_{j}" for i in range(1, 7) for j in ("hip", "knee")]
 KP, KD = {"hip": 100000.0, "knee": 120000.0}, {"hip": 250.0, "knee": 50.0}
@@ -80,7 +81,7 @@ class Spec(Node):
         return (m.header.stamp.sec, m.header.stamp.nanosec)
 
     def on_state(self, m):
-        if m.header.frame_id.split("/")[0] != NAME and not UNSIGNED:
+        if m.header.frame_id.split("/")[0] != NAME and not ANSWER_ALL:
             return
         self.pending = m
         if self.key(m) in self.refs:
@@ -261,7 +262,7 @@ def test_controller_from_the_doc_joins_and_an_unsigned_one_is_counted(join_scrip
     spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",
                       HEXAPOD_KEY_FILE=key)
     rogue = start_node(join_script, s, [sys.executable, str(script), "unsigned_ctl"],
-                       "unsigned_ctl", UNSIGNED="1", HEXAPOD_KEY_FILE="")
+                       "unsigned_ctl", UNSIGNED="1", ANSWER_ALL="1", HEXAPOD_KEY_FILE="")
 
     run_segment(s, "spec_ctl")
     s.wait_log("hexapod_sim", f"dropped a message on {T.JOINT_COMMANDS}: unauthenticated "
@@ -340,3 +341,21 @@ def test_joined_pd_law_in_charge_from_tick_0_equals_the_engines_pd_p(make_graph,
         cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
     assert np.array_equal(T.obs_from_columns(cols), ref.obs)
     assert np.array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)
+
+
+def test_with_authentication_off_an_unsigned_joined_controller_works(join_script, tmp_path,
+                                                                      monkeypatch):
+    monkeypatch.setenv("HEXAPOD_AUTH", "off")  # the graph's, the CLI's and the node's
+    script = tmp_path / "spec_node.py"
+    script.write_text(SPEC_NODE)
+    s = join_script("--duration", "0", "--no-switch", "--no-builtin", "pd_p")
+    s.wait_for(lambda: "HEXAPOD_AUTH=off (no key" in s.stdout(), 120, "the join line")
+    s.wait_log("hexapod_sim", "lockstep mode")
+    spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",
+                      UNSIGNED="1")
+    run_segment(s, "spec_ctl", cycles=1.2)
+    st = json.loads(hexapod_cli(s.domain, "status", "--json").stdout)["status"]
+    assert st["authentication"] == "off" and st["dropped"] == "0", st
+    assert stop(s, spec) == 0, s.stderr()
+    _, segments = analyzed_segments(s)
+    assert [g["controller"] for g in segments] == ["pd_pf", "spec_ctl", "pd_pf"], segments

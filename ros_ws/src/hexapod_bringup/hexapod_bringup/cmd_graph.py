@@ -463,9 +463,14 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
     if not got:
         return nodes, None
     sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"]
-    return nodes, (dict(sim[0].values) | {"level": sim[0].level, "message": sim[0].message,
-                                          "controller_nodes": ",".join(controllers)}
-                   if sim else None)
+    if not sim:
+        return nodes, None
+    values = dict(sim[0].values)
+    # the sim's view (it has long discovered every node) and this tool's
+    seen = set(controllers) | set(filter(None, values.get("controller_nodes", "").split(",")))
+    nodes = sorted(set(nodes) | seen)
+    return nodes, values | {"level": sim[0].level, "message": sim[0].message,
+                            "controller_nodes": ",".join(sorted(seen))}
 
 
 # --------------------------------------------------------------------------- commands

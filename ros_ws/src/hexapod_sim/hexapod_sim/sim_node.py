@@ -43,7 +43,7 @@ from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_common.runtime import inputs_matched
 from hexapod_common.runtime.input_guard import InputGuard
 from hexapod_common.runtime.node_main import run_node
-from hexapod_common.runtime.controller_graph import controllers_on_graph
+from hexapod_common.runtime.controller_graph import controller_nodes, controllers_on_graph
 from hexapod_common.runtime.controller_params import ControllerParamsReader
 from hexapod_common.runtime.param_topic import ParamAnnouncer
 from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
@@ -625,8 +625,18 @@ class SimNode(Node):
             "round_trip_p99_ms": f"{m.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
             "foreign_commands": str(m.foreign), **self.guard.values(),
+            "controller_nodes": self._controller_nodes(),
         }
         return C.Status("hexapod_sim", level, msg, values)
+
+    def _controller_nodes(self) -> str:
+        """The controller nodes on the graph as this node sees them (comma list), looked up
+        again only when the set of nodes changed (a node list costs tens of microseconds)."""
+        nodes = tuple(sorted(self.get_node_names_and_namespaces()))
+        cached = getattr(self, "_controllers_seen", None)
+        if cached is None or cached[0] != nodes:
+            cached = self._controllers_seen = (nodes, ",".join(controller_nodes(self)))
+        return cached[1]
 
     def _publish_status(self) -> None:
         m = self.ticks
