@@ -64,6 +64,7 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
+JOINED_MATCH_WAIT = 0.5  # s tick 0 waits more for a joined controller in charge (no service)
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
@@ -363,6 +364,13 @@ class SimNode(Node):
             self._wait_inputs_matched()
             if self.loop.stopped:
                 return
+            if node_of(self.ticks.in_charge) in self.wait_for and \
+                    self.ticks.in_charge not in engine_names():
+                # A joined controller in charge has no inputs_matched service: give its
+                # readers the time our side took to match ours, so tick 0 is not lost to it.
+                self.loop.spin(until=lambda: False, timeout=JOINED_MATCH_WAIT)
+                if self.loop.stopped:
+                    return
         self.log.info(
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.ticks.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
