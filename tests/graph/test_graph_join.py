@@ -298,6 +298,7 @@ def test_joined_controller_death_holds_falls_back_and_exits_7(join_script, tmp_p
     s.wait_log("hexapod_sim", "no command from spec_ctl since tick")
     s.wait_log("hexapod_sim", "spec_ctl silent for")
     s.wait_log("hexapod_sim", "falling back to joint damping")
+    s.wait_log("hexapod_sim", "spec_ctl (node spec_ctl) has left the graph while in charge")
     code = stop(s)
     assert code == EXIT_CODES["fallback"], (code, s.stderr())
     assert "fallback episode(s)" in s.stderr(), s.stderr()

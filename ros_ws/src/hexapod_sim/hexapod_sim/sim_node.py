@@ -637,6 +637,18 @@ class SimNode(Node):
         }
         return C.Status("hexapod_sim", level, msg, values)
 
+    def _say_if_gone(self, m: TickMachine) -> None:
+        """Say once when the silent controller in charge has left the graph (a node that
+        joined is not the launcher's: nobody else reports its death)."""
+        gone = (m.started and not m.finished and bool(m.silent_ticks)
+                and node_of(m.in_charge) not in self.get_node_names())
+        if gone and getattr(self, "_gone_said", None) != m.in_charge:
+            self._gone_said = m.in_charge
+            self.later.error(f"{m.in_charge} (node {node_of(m.in_charge)}) has left the graph "
+                             f"while in charge: `hexapod switch` to another controller")
+        elif not m.silent_ticks:
+            self._gone_said = None
+
     def _controller_nodes(self) -> str:
         """The controller nodes on the graph as this node sees them (comma list), looked up
         again only when the set of nodes changed (a node list costs tens of microseconds)."""
@@ -651,6 +663,7 @@ class SimNode(Node):
         if m.started and not m.silent_ticks and m.in_charge not in engine_names():
             # a joined controller answering (its commands pass the guard): not an outsider
             self.guard.vouch(node_of(m.in_charge))
+        self._say_if_gone(m)
         self.guard.refresh()
         data = C.encode_statuses(max(self.ticks.stamp, 0), [self.status()])
         self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], data))
