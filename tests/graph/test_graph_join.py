@@ -26,7 +26,7 @@ from hexapod_common.core import topics as T
 from hexapod_common.runtime import conversions as C
 from hexapod_metrics.bag import open_bag
 
-from .conftest import hexapod_cli
+from .conftest import hexapod_cli, sim_summary
 from .test_graph_exits import ROOT, Script
 
 EXAMPLE = ROOT / "ros_ws" / "install" / "my_controller" / "lib" / "my_controller" / "my_controller"
@@ -360,3 +360,74 @@ def test_with_authentication_off_an_unsigned_joined_controller_works(join_script
     assert stop(s, spec) == 0, s.stderr()
     _, segments = analyzed_segments(s)
     assert [g["controller"] for g in segments] == ["pd_pf", "spec_ctl", "pd_pf"], segments
+
+
+#: A managed (lifecycle) controller that joins unconfigured: it subscribes to the states
+#: only once active and answers with zero torque (signed with the helper).
+LIFECYCLE_NODE = r'''
+import rclpy
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+from sensor_msgs.msg import JointState
+from hexapod_common.auth import signer
+
+JOINTS = [f"leg{i}_{j}" for i in range(1, 7) for j in ("hip", "knee")]
+
+
+class Managed(LifecycleNode):
+    def __init__(self):
+        super().__init__("lc_ctl")
+        self.sub = None
+
+    def on_configure(self, state):
+        self.sign = signer("/hexapod/joint_commands")
+        self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 10)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state):
+        self.sub = self.create_subscription(JointState, "/hexapod/joint_states", self.on_state,
+                                            10)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state):
+        self.destroy_subscription(self.sub)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_state(self, m):
+        if m.header.frame_id.split("/")[0] == "lc_ctl":
+            z = [0.0] * 12
+            cmd = JointState(name=JOINTS, position=z, velocity=z, effort=z)
+            cmd.header.stamp, cmd.header.frame_id = m.header.stamp, "lc_ctl"
+            self.pub.publish(self.sign.message(cmd))
+
+
+rclpy.init()
+node = Managed()
+try:
+    rclpy.spin(node)
+except KeyboardInterrupt:
+    pass
+finally:
+    node.destroy_node()
+    rclpy.try_shutdown()
+'''
+
+
+def test_a_lifecycle_controller_that_joins_is_activated_by_switch(join_script, tmp_path):
+    script = tmp_path / "lifecycle_node.py"
+    script.write_text(LIFECYCLE_NODE)
+    s = join_script("--duration", "0", "--no-switch")
+    key = key_file(s)
+    s.wait_log("hexapod_sim", "lockstep mode")
+    node = start_node(join_script, s, [sys.executable, str(script)], "lc_ctl",
+                      HEXAPOD_KEY_FILE=key)
+    out = switch(s, "lc_ctl")
+    assert "switching pd_pf -> lc_ctl at the next tick; lc_ctl was unconfigured, now active" \
+        in out, out
+    t0 = switch_tick(s, "pd_pf", "lc_ctl")
+    s.wait_for(lambda: sim_time(s) > t0 + 0.02, 60, "ticks of lc_ctl")
+    assert "switching lc_ctl -> pd_pf" in switch(s, "pd_pf")
+    switch_tick(s, "lc_ctl", "pd_pf")
+    assert stop(s, node) == 0, s.stderr()
+    frames = commands_by_frame(s.bag)
+    assert frames.get("lc_ctl", 0) >= 20, frames
+    assert sim_summary(s.log("hexapod_sim"))["switches"] == 2
