@@ -31,9 +31,10 @@ class MyController(Node):
         self.waiting = None  # a state whose reference has not come yet
         self.sign = signer("/hexapod/joint_commands")
         self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 10)
-        # references come in bursts up to 50 ticks ahead: a deeper queue than the default 10
+        # deeper queues than the default 10: references come in bursts up to 50 ticks ahead,
+        # and a state must not roll out while the node catches up (answer late, not never)
         self.create_subscription(JointState, "/hexapod/reference", self.on_reference, 200)
-        self.create_subscription(JointState, "/hexapod/joint_states", self.on_state, 10)
+        self.create_subscription(JointState, "/hexapod/joint_states", self.on_state, 100)
 
     def on_reference(self, msg):
         index = [msg.name.index(j) for j in JOINTS]

@@ -233,8 +233,11 @@ class SimNode(Node):
         except NodeNameNonExistentError:  # gone between the two questions
             return f"{node} is not running on ROS_DOMAIN_ID={domain}"
         if T.JOINT_STATES not in subs:
-            return (f"{node} is not active (no subscription to {T.JOINT_STATES}): activate "
-                    f"it first (hexapod switch {controller} does for a lifecycle node)")
+            if controller in engine_names() or self._lifecycle(node):
+                return (f"{node} is not active (no subscription to {T.JOINT_STATES}): "
+                        f"activate it first (hexapod switch {controller} does)")
+            return (f"{node} does not subscribe to {T.JOINT_STATES} (yet: a node just "
+                    f"started may not be discovered fully): try again")
         if T.JOINT_COMMANDS not in pubs:
             return f"{node} does not publish {T.JOINT_COMMANDS}"
         if (self.pub[T.JOINT_STATES].get_subscription_count()
