@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set up the project in place: .venv (Python deps from requirements.lock) and a
-# colcon build of ros_ws (--symlink-install, so edits to package sources are live
+# colcon build of ros_ws and examples/ (--symlink-install, so edits to package sources are live
 # without a rebuild). Idempotent and fast when nothing changed: each step is
 # skipped while its stamp matches a hash of its inputs.
 #
@@ -104,6 +104,9 @@ build_key="$({
   cd "$ws/src"
   for f in */package.xml */setup.py */setup.cfg; do echo "== $f"; cat "$f"; done
   ls -1 -- */resource */*/config 2>/dev/null || true
+  cd "$root/examples"  # example packages built with the workspace (examples/my_controller)
+  for f in */package.xml */setup.py */setup.cfg; do echo "== examples/$f"; cat "$f"; done
+  ls -1 -- */resource 2>/dev/null || true
 } | hash_of)"
 build_stamp="$ws/install/.hexapod-setup.stamp"
 if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] \
@@ -118,6 +121,7 @@ if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] 
     unset AMENT_PREFIX_PATH COLCON_PREFIX_PATH CMAKE_PREFIX_PATH PYTHONPATH
     export PATH="$venv/bin:$PATH" VIRTUAL_ENV="$venv"
     logged "$ws/log/setup-colcon.log" colcon build --symlink-install \
+      --base-paths src ../examples \
       --event-handlers desktop_notification-
   ) || die "colcon build failed"
   echo "$build_key" >"$build_stamp"

@@ -167,7 +167,11 @@ GRAPH_ONLY = [
     (["--switch-at", "nan"], "argument --switch-at: 'nan' is not a simulated time"),
     (["--switch-at=-1"], "argument --switch-at: '-1' is not a simulated time"),
     (["--switch-at", "100"], "argument --switch-at: 100 s is after the end of the run"),
-    (["--controller", "pd_x"], "argument --controller: invalid choice: 'pd_x'"),
+    (["--controller", "pd-x"], "argument --controller: 'pd-x' is not a controller name"),
+    (["--no-builtin", "pd_x"], "argument --no-builtin: 'pd_x': expected a comma list of "
+     "pd_p, pd_pf"),
+    (["--no-builtin", "pd_pf"], "argument --controller: pd_pf is not started (--no-builtin "
+     "pd_pf)"),
     (["--mode=fast"], "argument --mode: invalid choice: 'fast'"),
     (["--duration"], "argument --duration: expected one argument"),
     (["--rt-priority", "99"], "argument --rt-priority: '99' is not a SCHED_FIFO priority in "
@@ -199,7 +203,7 @@ CLI_ONLY = [
     (["sweep", "ground", "--range=10:5:3"], "argument --range: '10:5:3': HI = 5 is below"),
     (["sweep", "tmax", "--t-max-list", "400,x"], "argument --t-max-list: '400,x' is not"),
     (["switch", "pd_p", "--timeout=nan"], "argument --timeout: 'nan' is not a timeout (s)"),
-    (["switch", "pd_x"], "argument controller: invalid choice: 'pd_x'"),
+    (["switch", "pd/x"], "argument controller: 'pd/x' is not a controller name"),
     (["status", "--timeout", "-1"], "argument --timeout: '-1' is not a timeout (s)"),
 ]
 

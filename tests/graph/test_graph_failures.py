@@ -218,8 +218,10 @@ def test_bad_parameter_at_runtime_is_rejected_and_the_old_value_kept(make_graph)
         assert get("actuator.t_max").double_value == 400.0
         r = set_one("ground.k_y", -1.0)  # rclpy's range check answers first
         assert not r.successful and "ground.k_y" in r.reason and "Min: 0.0" in r.reason
-        r = set_one("run.controller", "pd_x")
-        assert not r.successful and "allowed one of pd_p, pd_pf" in r.reason
+        r = set_one("run.controller", "pd_x")  # any controller on the graph: not there
+        assert not r.successful and "no controller node pd_x on ROS_DOMAIN_ID" in r.reason
+        r = set_one("run.controller", "pd/x")
+        assert not r.successful and "allowed a controller name" in r.reason, r.reason
         assert get("run.controller").string_value == "pd_pf"
         r = set_one("gait.velocity", 2.0)
         assert not r.successful and "read-only" in r.reason

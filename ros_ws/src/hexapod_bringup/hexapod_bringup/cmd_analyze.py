@@ -23,6 +23,12 @@ def _changed(s: SegmentResult) -> str:
                            for n, v in s.params)) if s.params else ""
 
 
+def _own(s: SegmentResult) -> str:
+    """'name=value,...' of a joined controller's own parameters ('' for the engine's)."""
+    return ",".join(f"{n}={v:g}" if isinstance(v, float) else f"{n}={v}"
+                    for n, v in s.controller_params)
+
+
 def _rows(a: BagAnalysis) -> list[dict[str, object]]:
     rows: list[dict[str, object]] = []
     for s in a.segments:
@@ -30,13 +36,15 @@ def _rows(a: BagAnalysis) -> list[dict[str, object]]:
                      "cycle": "", "t_start": s.t_start, "t_end": s.t_end, "cycles": s.cycles,
                      "params_changed": _changed(s).strip(),
                      **{n: getattr(s.indices, n) if s.indices else math.nan
-                        for n in REPORTED_NAMES}})
+                        for n in REPORTED_NAMES},
+                     "controller_params": _own(s)})
     for c in a.cycles:
         idx = c.indices
         rows.append({"bag": str(a.path), "kind": "cycle", "controller": c.controller,
                      "cycle": c.cycle, "t_start": c.t_a, "t_end": c.t_b, "cycles": 1,
                      "params_changed": "",
-                     **{n: getattr(idx, n) if idx else math.nan for n in REPORTED_NAMES}})
+                     **{n: getattr(idx, n) if idx else math.nan for n in REPORTED_NAMES},
+                     "controller_params": ""})
     return rows
 
 
@@ -47,6 +55,10 @@ def _print(analyses: list[BagAnalysis], per_cycle: bool) -> None:
               f"{a.params_source}{note}")
         if len(a.switches) > 1:
             print("  switches: " + ", ".join(f"{c} at {t:.3f} s" for t, c in a.switches[1:]))
+        for s in a.segments:
+            if s.controller_params:
+                print(f"  {s.controller} [{s.t_start:g}-{s.t_end:g}s] ran with its own "
+                      f"parameters (read from its node at the switch): {_own(s)}")
         if a.param_changes:
             print("  parameter changes (applied from that tick on): " + ", ".join(
                 f"{n} = {v!r} at {t:.3f} s ({node})" for t, node, n, v in a.param_changes))

@@ -1,7 +1,9 @@
 """`hexapod switch` and `hexapod status`, and a small launcher for the node graph.
 
-* ``hexapod switch pd_p|pd_pf``: makes sure the target controller node is lifecycle-active
-  (configures and activates it through its ``change_state`` service if needed), then sets
+* ``hexapod switch NAME``: any controller on the graph (docs/controllers.md: node
+  ``<name>_controller`` for the engine's controllers, else the node ``NAME``); a lifecycle
+  controller node is made active first (configured and activated through its
+  ``change_state`` service if needed), a plain node must be running; then it sets
   ``run.controller`` on ``/hexapod_sim`` through the standard ``set_parameters`` service;
   the sim hands over at the next tick boundary. One line on success; a one-line error and
   exit code 2 if the sim or the controller does not answer within ``--timeout``.
@@ -35,7 +37,7 @@ from pathlib import Path
 from typing import IO, Any, Callable, Sequence
 
 from hexapod_common.core.errors import HexapodError
-from hexapod_common.core.params import CONTROLLERS
+from hexapod_common.core.controller_names import check_name, engine_names, name_of, node_of
 from hexapod_common.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
                                                 PortFence, domain_id_from_env, shm_locks,
                                                 private_profile, remove_dead_shm,
@@ -73,6 +75,8 @@ RT_PRIORITY_NODES = RT_NODES + ("metrics", "markers", "foxglove_bridge")
 LOCKS_REFRESH = 2.0
 
 
+#: Wall s `hexapod status` gives DDS discovery to find every node of the graph.
+DISCOVERY_TIME = 1.5
 #: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
 TIMEOUT = number(0.0, 3600.0, "a timeout (s)", lo_open=True)
 
@@ -325,7 +329,7 @@ def ensure_active(node: Any, controller: str, timeout: float) -> str:
     from lifecycle_msgs.msg import State, Transition
     from lifecycle_msgs.srv import ChangeState, GetState
 
-    name = f"{controller}_controller"
+    name = node_of(controller)
     missing = (f"controller node {name} is not running on ROS_DOMAIN_ID={_domain()} "
                f"(no /{name}/get_state within {timeout:g} s): start it first")
     state = _call(node, GetState, f"/{name}/get_state", GetState.Request(), timeout,
@@ -344,6 +348,35 @@ def ensure_active(node: Any, controller: str, timeout: float) -> str:
         if not ok:
             raise GraphError(f"{name} refused lifecycle transition {transition}")
     return before
+
+
+def _is_lifecycle(node: Any, controller: str, timeout: float) -> bool:
+    """Whether ``controller`` is served by a lifecycle node (an engine controller, or a node
+    with a ``get_state`` service); a plain node is switched to as it is."""
+    if controller in engine_names():
+        return True
+    target = node_of(controller)
+    end = time.monotonic() + min(timeout, 2.0)
+    while time.monotonic() < end:  # discovery of the node and its services
+        if target in node.get_node_names():
+            try:
+                services = node.get_service_names_and_types_by_node(target, "/")
+            except Exception:  # noqa: BLE001 - gone meanwhile
+                return False
+            if any(name == f"/{target}/get_state" for name, _ in services):
+                return True
+            if any(name.endswith("/get_parameters") for name, _ in services):
+                return False
+        time.sleep(0.05)
+    return False
+
+
+def controller_name(text: str) -> str:
+    """argparse type of a controller name (core/controller_names.py)."""
+    try:
+        return check_name(text, "controller")
+    except HexapodError as err:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a controller name ({err})") from err
 
 
 def switch(controller: str, timeout: float = 10.0) -> str:
@@ -375,7 +408,8 @@ def switch(controller: str, timeout: float = 10.0) -> str:
         current = _call(node, GetParameters, "/hexapod_sim/get_parameters",
                         GetParameters.Request(names=["run.controller"]), timeout,
                         missing).values[0].string_value
-        before = ensure_active(node, controller, timeout)
+        before = (ensure_active(node, controller, timeout)
+                  if _is_lifecycle(node, controller, timeout) else "active")
         value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=controller)
         req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
         end = time.monotonic() + timeout
@@ -390,7 +424,7 @@ def switch(controller: str, timeout: float = 10.0) -> str:
             raise GraphError(f"hexapod_sim refused run.controller = {controller}: "
                              f"{result.reason}")
         activated = ("" if before == "active"
-                     else f"; {controller}_controller was {before}, now active")
+                     else f"; {node_of(controller)} was {before}, now active")
         if current == controller:
             return f"{controller} already in charge{activated}"
         return f"switching {current} -> {controller} at the next tick{activated}"
@@ -412,18 +446,31 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
         # Every node of the graph publishes its status there: keep the sim's.
         node.create_subscription(DiagnosticArray, STATUS, lambda m: got.extend(
             [m] if any(s.name == "hexapod_sim" for s in m.status) else []), 10)
-        end = time.monotonic() + timeout
-        while not got and time.monotonic() < end:
+        start = time.monotonic()
+        end = start + timeout
+        # until a status came and discovery had DISCOVERY_TIME s to find every node (a node
+        # that joined is seen later than the status of the sim that answers at once)
+        while (not got or time.monotonic() < start + min(DISCOVERY_TIME, timeout)) \
+                and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.1)
         nodes = sorted(n for n in node.get_node_names() if not n.startswith("hexapod_status_"))
+        from hexapod_common.runtime.controller_graph import controller_nodes
+
+        controllers = controller_nodes(node)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
     if not got:
         return nodes, None
     sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"]
-    return nodes, (dict(sim[0].values) | {"level": sim[0].level, "message": sim[0].message}
-                   if sim else None)
+    if not sim:
+        return nodes, None
+    values = dict(sim[0].values)
+    # the sim's view (it has long discovered every node) and this tool's
+    seen = set(controllers) | set(filter(None, values.get("controller_nodes", "").split(",")))
+    nodes = sorted(set(nodes) | seen)
+    return nodes, values | {"level": sim[0].level, "message": sim[0].message,
+                            "controller_nodes": ",".join(sorted(seen))}
 
 
 # --------------------------------------------------------------------------- commands
@@ -447,6 +494,9 @@ def _cmd_status(args: argparse.Namespace) -> int:
         print(json.dumps({"nodes": nodes, "status": st}, indent=1))
         return 0
     print(f"nodes: {', '.join(nodes)}")
+    print("controllers: " + (", ".join(
+        f"{name_of(n)} (node {n}{', in charge' if name_of(n) == st['controller'] else ''})"
+        for n in st.get("controller_nodes", "").split(",") if n) or "none on the graph"))
     print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}), "
           f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"
           f" fallback {st['fallback']}, real-time factor {st['real_time_factor']}: "
@@ -457,7 +507,9 @@ def _cmd_status(args: argparse.Namespace) -> int:
 def add_parser(subparsers: Any) -> None:
     """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
     sp = subparsers.add_parser("switch", help="hand control to another controller node")
-    sp.add_argument("controller", choices=CONTROLLERS)
+    sp.add_argument("controller", type=controller_name,
+                    help="a controller on the graph: pd_p, pd_pf or a node that joined "
+                         "(docs/controllers.md)")
     sp.add_argument("--timeout", type=TIMEOUT, default=10.0,
                     help="seconds to wait for the sim and the controller (default 10)")
     sp.set_defaults(func=_cmd_switch)

@@ -42,6 +42,7 @@ from hexapod_common.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtim
 from hexapod_common.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                         default_params_path, load_params, read_params_file)
 
+from . import join_options as join
 from .cli_args import OneLineParser, control_rate, number, overrides_from_args, param_value
 from .cmd_graph import RT_NODES, GraphProcesses
 
@@ -103,8 +104,9 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
                       "of each controller segment and the bag's path.",
                       epilog="Exit codes: " + ", ".join(f"{c} {n}" for n, c in
                                                         EXIT_CODES.items()))
-    p.add_argument("--controller", choices=CONTROLLERS, default="pd_pf",
-                   help="controller in charge at the start (default pd_pf)")
+    p.add_argument("--controller", type=join.controller_arg, default="pd_pf",
+                   help="controller in charge at the start (default pd_pf; a controller "
+                   "that joins: tick 0 waits for its node)")
     p.add_argument("--switch-to", choices=CONTROLLERS, dest="switch_to",
                    help="controller to hand over to (default: the other one)")
     p.add_argument("--switch-at", dest="switch_at",
@@ -143,6 +145,7 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
                    type=port, help="serve the graph's topics live to Foxglove on "
                    "ws://localhost:PORT (default 8765); implies --markers; layout: "
                    "docs/foxglove/hexapod_layout.json")
+    join.add_options(p)
     return p
 
 
@@ -202,7 +205,9 @@ def settings(args: argparse.Namespace) -> tuple[HexapodParams, dict[str, Any]]:
     Raises ParameterError / ParamsFileError (one line, named key) exactly as the CLI does.
     """
     overrides = overrides_from_args(args)
-    overrides["run.controller"] = args.controller
+    join.check(args)
+    if args.controller in CONTROLLERS:  # a joining controller is set on the sim alone
+        overrides["run.controller"] = args.controller
     overrides["sim.mode"] = args.mode
     if args.duration > 0:
         overrides["run.duration"] = args.duration
@@ -257,17 +262,19 @@ class Launcher:
         """The sim's own parameters: stop, scripted switch, summary file."""
         a = self.args
         extra = [f"summary_path:={self.summary_file}"]
-        if a.markers or a.foxglove is not None:
+        markers = a.markers or a.foxglove is not None
+        if markers or a.no_builtin or a.controller not in CONTROLLERS:
             # tick 0 waits for the markers node too, so the markers cover the run from t = 0
-            extra.append("wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller,"
-                         "metrics,markers")
-        switch_to = a.switch_to or ("pd_p" if a.controller == "pd_pf" else "pd_pf")
+            extra.append(f"wait_for:={join.wait_for(a, ('markers',) if markers else ())}")
+        if a.controller not in CONTROLLERS:
+            extra.append(f"run.controller:={a.controller}")
+        switch_to = join.default_switch_to(a)
         if a.duration > 0:
             extra.append("stop_at_end:=true")
-            if not a.no_switch:
+            if not a.no_switch and switch_to:
                 at = a.switch_at if a.switch_at is not None else a.duration / 2
                 extra += [f"switch_at:={float(at)!r}", f"switch_to:={switch_to}"]
-        elif not a.no_switch and a.switch_at is not None:
+        elif not a.no_switch and a.switch_at is not None and switch_to:
             extra += [f"switch_at:={float(a.switch_at)!r}", f"switch_to:={switch_to}"]
         return extra
 
@@ -275,8 +282,8 @@ class Launcher:
         """One line: what this run does."""
         a = self.args
         d = f"{a.mode} mode, {a.controller} in charge"
-        if not a.no_switch and (a.duration > 0 or a.switch_at is not None):
-            switch_to = a.switch_to or ("pd_p" if a.controller == "pd_pf" else "pd_pf")
+        switch_to = join.default_switch_to(a)
+        if not a.no_switch and (a.duration > 0 or a.switch_at is not None) and switch_to:
             at = a.switch_at if a.switch_at is not None else a.duration / 2
             d += f", {switch_to} from t = {at:g} s"
         return d + (f", {a.duration:g} s" if a.duration > 0 else ", until Ctrl-C")
@@ -314,8 +321,10 @@ class Launcher:
               f"{self.p.sim.dt:g} s: {convergence_note(self.p)}", flush=True)
         g.start("metrics", f"bag_path:={self.bag}")
         g.start("trajectory_generator")
-        g.start("pd_p_controller")
-        g.start("pd_pf_controller")
+        for c in join.builtins(self.args):
+            g.start(f"{c}_controller")
+        for line in join.join_lines(g.env, os.environ.get("ROS_DOMAIN_ID", "0")):
+            print(line, flush=True)
         if self.args.markers or self.args.foxglove is not None:
             g.start("markers")
         if self.args.foxglove is not None:

@@ -81,8 +81,10 @@ class FoxgloveBridge(Node):
             self.channels[topic] = foxglove.Channel(topic, message_encoding="cdr",
                                                     schema=schema)
             q = C.TOPIC_QOS[topic]
+            # commands volatile: a joined controller publishing with rclpy's defaults
             self.loop.subscribe(q.msg_type, topic, self._forwarder(topic),
-                                q.subscriber(C.RECORD_DEPTH))
+                                q.volatile_subscriber(C.RECORD_DEPTH)
+                                if topic == T.JOINT_COMMANDS else q.subscriber(C.RECORD_DEPTH))
         self.announcer = ParamAnnouncer(self, 1e-3)  # its own parameters, at tick 0
         self.log.info(f"Foxglove WebSocket server on ws://{host}:{self.port} "
                       f"({len(self.channels)} topics)")

@@ -26,7 +26,7 @@ from hexapod_common.core import msg_checks as M
 from hexapod_common.core import topics as T
 from hexapod_common.core.labels import in_charge
 from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
-from hexapod_common.core.params import CONTROLLERS
+from hexapod_common.runtime.controller_graph import NamesOnGraph
 from hexapod_common.core.topics import TICK_TOPICS, TOPICS
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_common.runtime.input_guard import InputGuard
@@ -63,6 +63,8 @@ class MetricsNode(Node):
         # takes its queues in batches, topic by topic, and may lag by seconds: the window is
         # wide (a stamp of 1e6 s, which once made the scorer skip a million cycles, is not).
         self.window = M.StampWindow(ahead_s=60.0)
+        # /hexapod/active_controller names an engine controller or a node on the graph
+        self.controller_names = NamesOnGraph(self)
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
@@ -173,7 +175,7 @@ class MetricsNode(Node):
             cb = self._on_param_record
         elif topic == T.ACTIVE_CONTROLLER:  # at the tick the switch took effect
             def cb(data: bytes, topic: str = topic) -> None:
-                got = g.string(topic, data, CONTROLLERS)
+                got = g.string(topic, data, self.controller_names)
                 if got is None:
                     return
                 self._write_controller(self.controller_times.on_controller(got[1], got[0]))
@@ -192,7 +194,9 @@ class MetricsNode(Node):
                     g.drop(topic, d.cause, d.detail)
                     return
                 self._write(topic, stamp, payload)
-        self.loop.subscribe(q.msg_type, topic, cb, q.subscriber(C.RECORD_DEPTH))
+        # commands: volatile, so that a controller publishing with rclpy's defaults is heard
+        self.loop.subscribe(q.msg_type, topic, cb, q.volatile_subscriber(C.RECORD_DEPTH)
+                            if topic == T.JOINT_COMMANDS else q.subscriber(C.RECORD_DEPTH))
 
     def _on_param_record(self, data: bytes) -> None:
         """A node's parameter record: into the bag (message, MCAP metadata, mirror)."""

@@ -34,6 +34,7 @@ from hexapod_common.core import topics as T
 from .core.actuator import saturate
 from .core.engine import Physics
 from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.controller_names import check_name, engine_names, node_of
 from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
 from hexapod_common.core.switch_channel import ChannelError, SwitchServer
 from hexapod_common.core import trace as _trace
@@ -42,11 +43,15 @@ from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_common.runtime import inputs_matched
 from hexapod_common.runtime.input_guard import InputGuard
 from hexapod_common.runtime.node_main import run_node
+from hexapod_common.runtime.controller_graph import controller_nodes, controllers_on_graph
+from hexapod_common.runtime.controller_params import ControllerParamsReader
 from hexapod_common.runtime.param_topic import ParamAnnouncer
 from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
 from hexapod_common.runtime.rt_sched import use_rt_priority
 
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
+#: A controller node's endpoints (also those of a joined controller in charge at start).
+CONTROLLER_ENDPOINTS = ((T.JOINT_STATES, T.REFERENCE), (T.JOINT_COMMANDS,))
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "trajectory_generator": ((T.JOINT_STATES,), (T.REFERENCE,)),
     "pd_p_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
@@ -59,6 +64,7 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
+JOINED_MATCH_WAIT = 0.5  # s tick 0 waits more for a joined controller in charge (no service)
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
@@ -105,8 +111,11 @@ class SimNode(Node):
         # records) goes out just after the next tick's messages: off the round trip.
         self.after_send: list[Callable[[], None]] = []
         self.later = AfterSendLog(self.log, self.after_send, self._ticking_in_realtime)
-        self.binding = ParamBinding(self, declare_params(self), self._on_params,
-                                    check=self._check_change, log=self.later)
+        # run.controller names any controller on the graph (core/controller_names.py), not
+        # only the engine's: checked for syntax here, for presence by _check_change.
+        checks = {"run.controller": lambda name, value: check_name(value, name)}
+        self.binding = ParamBinding(self, declare_params(self, checks=checks), self._on_params,
+                                    check=self._check_change, log=self.later, checks=checks)
         self.stop_at_end = declare_node_param(self, "stop_at_end")
         wait_for = declare_node_param(self, "wait_for")
         self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
@@ -146,7 +155,9 @@ class SimNode(Node):
             # As deep as the writers' histories: a process flooding the topic (its messages are
             # dropped) must not push the controller's command out of the queue while the sim
             # is off the CPU (that costs a lockstep timeout).
-            C.TOPIC_QOS[T.JOINT_COMMANDS].subscriber(C.HISTORY_DEPTH))
+            # Volatile: matches every writer, transient-local or volatile (a node publishing
+            # with rclpy's defaults is heard; docs/controllers.md, "QoS").
+            C.TOPIC_QOS[T.JOINT_COMMANDS].volatile_subscriber(C.HISTORY_DEPTH))
         # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
         self.channel: SwitchServer | None = None
         try:
@@ -165,6 +176,9 @@ class SimNode(Node):
         self.rtf = 0.0
         # Start values now; changes at the tick boundary that applies them (ready()).
         self.announcer = ParamAnnouncer(self, self.period, deferred=True)
+        # A joined controller's own parameters, read through its parameter services when it
+        # takes over, go into the bag as a 'controller' record (runtime/controller_params.py).
+        self.controller_params = ControllerParamsReader(self, self.loop, self._record_controller)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -197,7 +211,7 @@ class SimNode(Node):
         """Refuse a ``run.controller`` change to a controller that cannot take over now."""
         for p in changes:
             if p.name == "run.controller" and isinstance(p.value, str) and \
-                    p.value in ("pd_p", "pd_pf") and p.value != self.ticks.in_charge:
+                    p.value != self.ticks.in_charge:
                 why = self.controller_unready(p.value)
                 if why:
                     return f"run.controller = {p.value!r} refused: {why}"
@@ -208,18 +222,22 @@ class SimNode(Node):
 
         Asked of the graph by node (tens of microseconds), not by topic: the endpoint
         infos by topic cost ~0.3 ms here, which a realtime tick cannot spare."""
-        node = f"{controller}_controller"
+        node = node_of(controller)
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         if node not in self.get_node_names():
-            return f"{node} is not running on ROS_DOMAIN_ID={domain}"
+            return (f"no controller node {node} on ROS_DOMAIN_ID={domain} (controllers on the "
+                    f"graph: {', '.join(controllers_on_graph(self)) or 'none'})")
         try:
             subs = {t for t, _ in self.get_subscriber_names_and_types_by_node(node, "/")}
             pubs = {t for t, _ in self.get_publisher_names_and_types_by_node(node, "/")}
         except NodeNameNonExistentError:  # gone between the two questions
             return f"{node} is not running on ROS_DOMAIN_ID={domain}"
         if T.JOINT_STATES not in subs:
-            return (f"{node} is not active (no subscription to {T.JOINT_STATES}): activate "
-                    f"it first (hexapod switch {controller} does)")
+            if controller in engine_names() or self._lifecycle(node):
+                return (f"{node} is not active (no subscription to {T.JOINT_STATES}): "
+                        f"activate it first (hexapod switch {controller} does)")
+            return (f"{node} does not subscribe to {T.JOINT_STATES} (yet: a node just "
+                    f"started may not be discovered fully): try again")
         if T.JOINT_COMMANDS not in pubs:
             return f"{node} does not publish {T.JOINT_COMMANDS}"
         if (self.pub[T.JOINT_STATES].get_subscription_count()
@@ -240,7 +258,8 @@ class SimNode(Node):
         """What is still missing before tick 0 may be published (empty when ready)."""
         missing = []
         for node in self.wait_for:
-            subs, pubs = EXPECTED_ENDPOINTS.get(node, ((), ()))
+            subs, pubs = EXPECTED_ENDPOINTS.get(node, CONTROLLER_ENDPOINTS if node == node_of(
+                self.ticks.in_charge) else ((), ()))
             if node not in self.get_node_names():
                 missing.append(f"node {node}")
                 continue
@@ -268,7 +287,7 @@ class SimNode(Node):
         """
         from lifecycle_msgs.srv import GetState
 
-        names = [n for n in self.wait_for if n.endswith("_controller")]
+        names = [n for n in self.wait_for if n.endswith("_controller") and self._lifecycle(n)]
         # Kept for the switch channel's checks: a client made at switch time may send its
         # request before the controller's service has matched it, and wait forever.
         clients = [self._state_client(n) for n in names]
@@ -348,14 +367,47 @@ class SimNode(Node):
             self._wait_inputs_matched()
             if self.loop.stopped:
                 return
+            if node_of(self.ticks.in_charge) in self.wait_for and \
+                    self.ticks.in_charge not in engine_names():
+                # A joined controller in charge has no inputs_matched service: give its
+                # readers the time our side took to match ours, so tick 0 is not lost to it.
+                self.loop.spin(until=lambda: False, timeout=JOINED_MATCH_WAIT)
+                if self.loop.stopped:
+                    return
         self.log.info(
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.ticks.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
             + (" (stops there)" if self.stop_at_end else " (runs until stopped)"))
+        if self.ticks.in_charge not in engine_names():
+            self.controller_params.read(self.ticks.in_charge, 0)
         self.ticks.start(time.monotonic())
         self._rtf = (self.ticks.wall_start, 0)
         self._prepare()
         self._send()
+
+    def _lifecycle(self, node: str) -> bool:
+        """Whether ``node`` is on the graph with a lifecycle ``get_state`` service."""
+        try:
+            services = self.get_service_names_and_types_by_node(node, "/")
+        except NodeNameNonExistentError:
+            return False
+        return any(s == f"/{node}/get_state" for s, _ in services)
+
+    def _record_controller(self, controller: str, tick: int, values: dict[str, Any]) -> None:
+        """Publish a joined controller's parameters as a 'controller' record of its tick."""
+        from hexapod_common.core.param_log import ParamRecord
+
+        a = self.announcer
+        rec = ParamRecord(node_of(controller), "controller", tick,
+                          T.stamp_ns(tick * self.period), values)
+        from hexapod_common.core.param_log import RECORD_NAME
+
+        status = C.Status(f"{RECORD_NAME}/{rec.node}", "ok", rec.kind, rec.to_map())
+        a.pub.publish(self.guard.signed(a.signer, C.encode_statuses(rec.stamp_ns, [status])))
+        a.sent += 1
+        self.later.info(f"{controller}'s parameters at tick {tick} recorded "
+                        f"({len(values)} values)" if values else
+                        f"{controller}'s parameters could not be read: recorded none")
 
     def _announce(self) -> None:
         """Publish the controller in charge on /hexapod/active_controller (signed)."""
@@ -441,6 +493,8 @@ class SimNode(Node):
         docs/benchmarks.md). The switch then takes effect at the following boundary."""
         if self.channel is not None:
             self.after_send.append(self._serve_channel)
+        if self.controller_params.pending:
+            self.after_send.append(self.controller_params.poll)
         if self.switch_to and tick * self.period >= self.switch_at - 1e-12:
             to, self.switch_to = self.switch_to, ""
             result = self.set_parameters([Parameter("run.controller", value=to)])[0]
@@ -451,6 +505,8 @@ class SimNode(Node):
         """Announce the new controller in charge (once the tick is out: the controllers go
         by the states' frame_id, the recorder by the first state naming the new one)."""
         self.after_send.append(self._announce)
+        if new not in engine_names():
+            self.controller_params.read(new, tick)
 
     def ready(self, tick: int) -> None:
         """Parameter changes announced at their tick (once it is out); the next tick's
@@ -480,18 +536,24 @@ class SimNode(Node):
             parts = text.split()
             if len(parts) != 2 or parts[0] != "switch":
                 self.channel.reply(addr, f"error unknown request {text[:60]!r} "
-                                         f"(expected 'switch pd_p|pd_pf')")
+                                         f"(expected 'switch NAME')")
                 continue
             to = parts[1]
             try:
-                check_controller(to)
+                check_name(to)
             except ParameterError as err:
                 self.channel.reply(addr, f"error {err}")
                 continue
             if to == self.ticks.in_charge and self.ticks.pending_controller is None:
                 self.channel.reply(addr, f"ok {to} already in charge")
                 continue
-            self._ask_state(to, addr)
+            node = node_of(to)
+            if node not in self.get_node_names():
+                self.channel.reply(addr, "error " + self.controller_unready(to))
+            elif to in engine_names() or self._lifecycle(node):
+                self._ask_state(to, addr)  # a lifecycle node: active first
+            else:  # a plain node: present, subscribed and matched (run.controller's check)
+                self._set_controller(to, addr)
 
     def _state_client(self, name: str) -> Any:
         """The (kept) client of controller node ``name``'s lifecycle get_state service."""
@@ -507,13 +569,13 @@ class SimNode(Node):
     def _ask_state(self, to: str, addr: str) -> None:
         from lifecycle_msgs.srv import GetState
 
-        name = f"{to}_controller"
+        name = node_of(to)
         client = self._state_client(name)
         if not client.service_is_ready():
             assert self.channel is not None
             self.channel.reply(addr, f"error controller node {name} is not running on "
                                      f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
-                                     f"(no /{name}/get_state): start it first")
+                                     f"(no /{name}/get_state yet): try again")
             return
         self.state_checks.append((to, addr, client.call_async(GetState.Request()),
                                   time.monotonic() + STATE_CHECK_TIMEOUT))
@@ -523,8 +585,13 @@ class SimNode(Node):
         res = future.result()
         state = res.current_state.label if res is not None else "not answering"
         if state != "active":
-            self.channel.reply(addr, f"error {to}_controller is {state}: not active")
+            self.channel.reply(addr, f"error {node_of(to)} is {state}: not active")
             return
+        self._set_controller(to, addr)
+
+    def _set_controller(self, to: str, addr: str) -> None:
+        """Set run.controller = ``to`` (its checks) and answer the switch request."""
+        assert self.channel is not None
         old = self.ticks.in_charge
         result = self.set_parameters([Parameter("run.controller", value=to)])[0]
         if not result.successful:
@@ -569,10 +636,37 @@ class SimNode(Node):
             "round_trip_p99_ms": f"{m.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
             "foreign_commands": str(m.foreign), **self.guard.values(),
+            "controller_nodes": self._controller_nodes(),
         }
         return C.Status("hexapod_sim", level, msg, values)
 
+    def _say_if_gone(self, m: TickMachine) -> None:
+        """Say once when the silent controller in charge has left the graph (a node that
+        joined is not the launcher's: nobody else reports its death)."""
+        gone = (m.started and not m.finished and bool(m.silent_ticks)
+                and node_of(m.in_charge) not in self.get_node_names())
+        if gone and getattr(self, "_gone_said", None) != m.in_charge:
+            self._gone_said = m.in_charge
+            self.later.error(f"{m.in_charge} (node {node_of(m.in_charge)}) has left the graph "
+                             f"while in charge: `hexapod switch` to another controller")
+        elif not m.silent_ticks:
+            self._gone_said = None
+
+    def _controller_nodes(self) -> str:
+        """The controller nodes on the graph as this node sees them (comma list), looked up
+        again only when the set of nodes changed (a node list costs tens of microseconds)."""
+        nodes = tuple(sorted(self.get_node_names_and_namespaces()))
+        cached = getattr(self, "_controllers_seen", None)
+        if cached is None or cached[0] != nodes:
+            cached = self._controllers_seen = (nodes, ",".join(controller_nodes(self)))
+        return cached[1]
+
     def _publish_status(self) -> None:
+        m = self.ticks
+        if m.started and not m.silent_ticks and m.in_charge not in engine_names():
+            # a joined controller answering (its commands pass the guard): not an outsider
+            self.guard.vouch(node_of(m.in_charge))
+        self._say_if_gone(m)
         self.guard.refresh()
         data = C.encode_statuses(max(self.ticks.stamp, 0), [self.status()])
         self.pub[T.STATUS].publish(self.guard.signed(self.signers[T.STATUS], data))

@@ -19,7 +19,9 @@ from .errors import HexapodError
 
 #: Name of the MCAP Metadata records (and prefix of the DiagnosticStatus names).
 RECORD_NAME = "hexapod_parameters"
-KINDS = ("start", "change")
+#: ``controller``: the parameters a controller node that joined the graph declared, read by
+#: the sim when it took over (tick = the switch tick; node = the controller's node).
+KINDS = ("start", "change", "controller")
 
 
 class ParamRecordError(HexapodError, ValueError):

@@ -93,6 +93,11 @@ class TopicQos:
         """A subscriber profile of ``depth`` that gets late-joiner history if offered."""
         return _qos(depth, self.spec.transient)
 
+    def volatile_subscriber(self, depth: int) -> QoSProfile:
+        """A volatile subscriber profile of ``depth``: matches transient-local and volatile
+        writers alike (no late-joiner history)."""
+        return _qos(depth, False)
+
 
 #: The topic table with rclpy's QoS profiles and message classes.
 TOPIC_QOS: dict[str, TopicQos] = {t: TopicQos(spec) for t, spec in T.TOPICS.items()}

@@ -39,6 +39,10 @@ PUBLISHERS: dict[str, tuple[str, ...]] = {
 #: Topics whose messages the graph's nodes sign (/clock is a bounded type: no room for a tag).
 SIGNED_TOPICS = frozenset(PUBLISHERS) - {T.CLOCK}
 _STAMP = struct.Struct("<iI")
+#: What an unauthenticated message lacks (said with the first drop of each topic).
+AUTH_HINT = ("no valid 32-byte trailer (sender | sequence | BLAKE2b-128 tag keyed with the "
+             "run's key from HEXAPOD_KEY_FILE): sign with hexapod_common.auth, or as "
+             "docs/controllers.md, 'Authentication', says")
 
 
 def _decode(codec: C.JointStateCodec, data: bytes) -> C.JointStateView:
@@ -75,6 +79,9 @@ class InputGuard:
         self.outsiders: dict[str, set[str]] = {}
         self._verifiers: dict[str, Verifier | Unsigned] = {}
         self._suspect: set[str] = set()
+        #: nodes outside GRAPH_NODES whose signed messages were accepted (a controller that
+        #: joined the graph, vouched for by the sim): never named as outside the graph
+        self.vouched: set[str] = set()
         self._looked_at = 0  # drops counted at the last look-up
         if self.key is None:
             log.warning("message authentication is off (HEXAPOD_AUTH=off): any process on "
@@ -103,7 +110,7 @@ class InputGuard:
         try:
             payload = self._verifier(topic).verify(data)
         except Rejected as r:
-            self.drop(topic, r.cause)
+            self.drop(topic, r.cause, AUTH_HINT if r.cause == M.UNAUTHENTICATED else "")
             return None
         if trace.TRACER is not None:
             trace.TRACER.mark(trace.VERIFIED, topic, trace.header_stamp(payload))
@@ -190,7 +197,8 @@ class InputGuard:
             except Exception:  # noqa: BLE001 - the graph can be gone at shutdown
                 continue
             names = {f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos
-                     if i.node_name not in PUBLISHERS.get(topic, ()) or
+                     if (i.node_name not in PUBLISHERS.get(topic, ())
+                         and i.node_name not in self.vouched) or
                      i.node_namespace not in ("/", "")}
             new = names - self.outsiders.get(topic, set())
             if new:
@@ -199,6 +207,14 @@ class InputGuard:
                     f"publishers on {topic} that are not nodes of this graph: "
                     f"{', '.join(sorted(new))}; their messages are dropped "
                     f"({self.drops.by_topic(topic)} so far)")
+
+    def vouch(self, node: str) -> None:
+        """``node`` (in namespace /) is a node of the graph: its messages were accepted."""
+        if node not in self.vouched:
+            self.vouched.add(node)
+            for names in self.outsiders.values():
+                names.discard(f"/{node}")
+            self.outsiders = {t: n for t, n in self.outsiders.items() if n}
 
     def refresh(self) -> None:
         """Look the suspect topics' publishers up again if more was dropped (call at a low

@@ -122,8 +122,13 @@ def _override(node: Node, name: str) -> Any:
     return None if param is None else param.value
 
 
-def declare_params(node: Node, defaults: HexapodParams | None = None) -> HexapodParams:
+def declare_params(node: Node, defaults: HexapodParams | None = None,
+                   checks: Checks | None = None) -> HexapodParams:
     """Declare the model parameters ``node`` uses (:data:`USES`); return all, validated.
+
+    ``checks`` replaces the table's check of some parameters on this node (the sim's
+    ``run.controller`` takes any controller on the graph, not only the engine's); their
+    values are kept as checked, beside the cross-checks of the rest.
 
     Values come from the node's overrides (params file, ``-p``), else from ``defaults``
     (default: the shipped base experiment); the parameters the node does not use are read
@@ -148,8 +153,23 @@ def declare_params(node: Node, defaults: HexapodParams | None = None) -> Hexapod
             bad = _override(node, name)
             check_value(name, bad)
             raise ParameterError(name, bad, f"{spec.allowed()} ({err})") from err
-        flat[name] = check_value(name, value)
-    return from_flat(flat)
+        flat[name] = (checks or {}).get(name, check_value)(name, value)
+    own = {n: flat.pop(n) for n in (checks or {}) if n in flat}
+    p = from_flat({**flat, **{n: base[n] for n in own}})
+    return _with(p, own)
+
+
+#: Per-parameter checks that replace the table's on one node: (name, value) -> value.
+Checks = dict[str, Callable[[str, Any], Any]]
+
+
+def _with(p: HexapodParams, values: dict[str, Any]) -> HexapodParams:
+    """``p`` with dotted ``values`` set (already checked)."""
+    groups: dict[str, dict[str, Any]] = {}
+    for name, value in values.items():
+        group, _, key = name.partition(".")
+        groups.setdefault(group, {})[key] = value
+    return replace(p, **{g: replace(getattr(p, g), **kv) for g, kv in groups.items()})
 
 
 def declare_node_param(node: Node, name: str) -> Any:
@@ -179,7 +199,7 @@ class ParamBinding:
     def __init__(self, node: Node, params: HexapodParams,
                  on_change: Callable[[HexapodParams, set[str]], None] | None = None,
                  check: Callable[[list[Parameter]], str | None] | None = None,
-                 log: Any = None) -> None:
+                 log: Any = None, checks: Checks | None = None) -> None:
         from .hot_loop import FastLogger
 
         self.node = node
@@ -188,6 +208,7 @@ class ParamBinding:
         self.params = params
         self._on_change = on_change
         self._check = check
+        self._checks = checks or {}
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
@@ -205,13 +226,22 @@ class ParamBinding:
             groups: dict[str, dict[str, Any]] = {}
             for p in ours:
                 group, _, key = p.name.partition(".")
-                groups.setdefault(group, {})[key] = check_value(p.name, p.value)
+                groups.setdefault(group, {})[key] = self._checks.get(
+                    p.name, check_value)(p.name, p.value)
             cur = self.params
             return replace(cur, **{g: replace(getattr(cur, g), **kv) for g, kv in groups.items()})
         flat = self.params.to_flat()
+        own = {}
         for p in ours:
-            flat[p.name] = check_value(p.name, p.value)
-        return from_flat(flat)
+            if p.name in self._checks:
+                own[p.name] = self._checks[p.name](p.name, p.value)
+            else:
+                flat[p.name] = check_value(p.name, p.value)
+        for name in self._checks:
+            if name in flat and name not in own:
+                own[name] = flat.pop(name)
+        base = load_params().to_flat()
+        return _with(from_flat({**flat, **{n: base[n] for n in own}}), own)
 
     def _validate(self, changes: list[Parameter]) -> SetParametersResult:
         self._validated = None

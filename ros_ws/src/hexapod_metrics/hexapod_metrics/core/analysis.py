@@ -16,7 +16,7 @@ segment's indices cover the cycles its controller fully commanded.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,8 @@ from hexapod_common.core.cdr import decode_diagnostic_array
 from hexapod_common.core.errors import CdrError
 from hexapod_common.core.labels import in_charge
 from hexapod_common.core.layout import O_HP, O_TQ
-from hexapod_common.core.param_log import ParamTimeline
+from hexapod_common.core.controller_names import node_of
+from hexapod_common.core.param_log import ParamRecord, ParamTimeline
 from hexapod_common.core.params import HexapodParams
 
 from ..bag import Bag, BagReadError, iter_joint_state_blocks, open_bag
@@ -56,6 +57,10 @@ class SegmentResult:
     indices: Indices | None
     params: tuple[tuple[str, Any], ...] = ()
     """Parameters in force over the segment that differ from the start values."""
+    controller_params: tuple[tuple[str, Any], ...] = ()
+    """A joined controller's own parameters (declared by its node, read by the sim when it
+    took over: the bag's ``controller`` record); empty for the engine's controllers, whose
+    gains are model parameters (``pd_p.*``, ``pd_pf.*``)."""
 
 
 @dataclass
@@ -155,7 +160,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
         missing = [t for t in STREAMS if t not in bag.topics]
         if missing:
             raise BagReadError(f"{path}: not a hexapod bag (no {', '.join(missing)})")
-        p, source, tl, _ = bag_params(bag)
+        p, source, tl, records = bag_params(bag)
         dt = p.sim.control_period
         dt_ns = int(round(dt * 1e9))
         m = int(round(p.cycle_time / dt))
@@ -201,12 +206,30 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
     if ticks == 0:
         why = f" (truncated: {reason})" if truncated else ""
         raise BagReadError(f"{path}: no hexapod samples in the readable part of the bag{why}")
-    segments = _segments(cycles, changes, dt, last_tick * dt, tl)
+    segments = [_with_controller_params(s, int(round(s.t_start / dt)), records)
+                for s in _segments(cycles, changes, dt, last_tick * dt, tl)]
     switches = [(k * dt, c) for k, c in switch_ticks]
     param_changes = [(k * dt, node, name, v) for k, node, name, v in tl.changes
                      if k > 0] if tl else []
     return BagAnalysis(Path(path), p, source, truncated, reason, ticks, cycles, segments,
                        switches, online, series, param_changes)
+
+
+#: Parameters every rclpy node declares: not the controller's own.
+_ROS_OWN = ("use_sim_time", "start_type_description_service")
+
+
+def _with_controller_params(s: SegmentResult, tick: int,
+                            records: tuple[ParamRecord, ...]) -> SegmentResult:
+    """``s`` with its controller's own parameters: the newest ``controller`` record of its
+    node at or before the segment's first tick (a joined controller; see SegmentResult)."""
+    node = node_of(s.controller)
+    mine = [r for r in records if r.kind == "controller" and r.node == node and r.tick <= tick]
+    if not mine:
+        return s
+    values = max(mine, key=lambda r: r.tick).values
+    return replace(s, controller_params=tuple(sorted(
+        (n, v) for n, v in values.items() if n not in _ROS_OWN)))
 
 
 def with_param_boundaries(changes: list[tuple[int, str]],
