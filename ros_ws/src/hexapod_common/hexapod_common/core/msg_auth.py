@@ -46,6 +46,7 @@ TRAILER_BYTES = SENDER_BYTES + 8 + TAG_BYTES  # 32: keeps 8-byte alignment
 MAX_SENDERS = 256  # senders remembered per topic (a restarted node is a new sender)
 _SEQ = struct.Struct("<Q")
 _SEQ_MASK = (1 << 56) - 1
+_ZEROS = bytes(8)
 
 
 class AuthError(HexapodError):
@@ -129,13 +130,14 @@ class Signer:
         if tr is not None:
             tr.mark(trace.SIGN0, self.topic, trace.header_stamp(payload))
         self.seq += 1
-        pad = -len(payload) % 8
-        body = payload + b"\0" * pad if pad else payload
-        head = self.sender + _SEQ.pack(self.seq | pad << 56)
+        n = len(payload)
+        pad = _ZEROS[:-n % 8]
+        head = self.sender + _SEQ.pack(self.seq | len(pad) << 56)
         h = self._base.copy()
-        h.update(body)
+        h.update(payload)
+        h.update(pad)
         h.update(head)
-        out = b"".join((body, head, h.digest()))
+        out = b"".join((payload, pad, head, h.digest()))  # the one copy of the payload
         if tr is not None:
             tr.mark(trace.SIGN1, self.topic)
         return out
