@@ -99,9 +99,11 @@ def lost_ticks(bag: Path, period_ns: int, at: list[int]) -> tuple[list[int], int
     return lost, len(states), n + 1
 
 
-def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
-    """(% on time before, after ``at_tick``, median real-time factor before, after) from the
-    sim's status messages in ``bag``."""
+def on_time_split(bag: Path, at_tick: int
+                  ) -> tuple[float, float, float, float, list[float]]:
+    """(% on time before, after ``at_tick``, median real-time factor before, after, % on
+    time in each of the sim's status intervals (0.5 wall s) after ``at_tick``) from the sim's
+    status messages in ``bag``."""
     import numpy as np
 
     from hexapod_common.core import cdr
@@ -128,9 +130,11 @@ def on_time_split(bag: Path, at_tick: int) -> tuple[float, float, float, float]:
     def rtf(part: list[tuple[int, int, float]]) -> float:
         return float(np.median([r[2] for r in part])) if part else float("nan")
     started = [r for r in rows if r[0] > 0]
+    after = [before] + [r for r in rows if r[0] > before[0]]
+    bins = [pct(a, b) for a, b in zip(after, after[1:]) if b[0] > a[0]]
     return (pct((0, 0), before), pct(before, last),
             rtf([r for r in started if r[0] <= at_tick]),
-            rtf([r for r in started if r[0] > at_tick]))
+            rtf([r for r in started if r[0] > at_tick]), bins)
 
 
 #: Wall s after the (possible) kill over which the sim's CPU time is taken: the lease.
@@ -297,7 +301,7 @@ def main() -> int:
             at = killed["kill_tick"]
             rows = (("no kill", base_run, on_time_split(Path(tmp) / "run0" / "bag", at)),
                     ("idle killed", killed, killed["split"]))
-            for label, r, (b, a, rb, ra) in rows:
+            for label, r, (b, a, rb, ra, bins) in rows:
                 print(f"{label}: {r['ticks']} ticks, {r['missed']} missed; before / after tick "
                       f"{at} (the kill, {args.kill_idle:g} wall s in): on time {b:.2f} % / "
                       f"{a:.2f} %, real-time factor (median of the sim's statuses) "
@@ -306,7 +310,9 @@ def main() -> int:
                           "" if r is base_run else
                           "; the killed controller left this process's view of the graph "
                           + (f"after more than {CPU_WINDOW:g} s" if r["gone"] is None
-                             else f"{r['gone']:.2f} s after the kill")), flush=True)
+                             else f"{r['gone']:.2f} s after the kill"))
+                      + "; on time per 0.5 s status interval of the sim from the kill: "
+                      + " ".join(f"{x:.1f}" for x in bins) + " %", flush=True)
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return 0
     try:

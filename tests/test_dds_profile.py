@@ -10,7 +10,8 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from hexapod_common.runtime.dds_profile import (HEALTHY_CHECK_MS, PORT_QUEUE, READER_MAX_SAMPLES,
+from hexapod_common.runtime.dds_profile import (ANNOUNCE_S, HEALTHY_CHECK_MS, LEASE_S,
+                                                PORT_QUEUE, READER_MAX_SAMPLES,
                                                 RESTART_PARTICIPANT_IDS, SHM_DIR,
                                                 TOOL_PARTICIPANT_IDS, PortFence,
                                                 domain_id_from_env, remove_dead_shm, shm_locks,
@@ -57,13 +58,21 @@ def _shm(path):
 
 def test_the_shared_memory_transport_is_sized_and_checked_as_documented(tmp_path):
     # dds_profile.py: the port queue bounds what a SIGKILLed reader leaves allocated in its
-    # senders; the port check (longer than Fast DDS's 1 s, shorter than the 5 s lease: 10 s
-    # failed the test suite) shortens the port re-creation after such a kill.
+    # senders; the participants' lease ends before the port check (longer than Fast DDS's
+    # 1 s; 10 s failed the test suite) can declare such a reader's port broken, so that its
+    # port is never re-created, and it is announced several times per lease.
     path = private_profile(tmp_path)
-    lease = _rtps(path).find("d:builtin/d:discovery_config/d:leaseDuration/d:sec", NS)
+    disc = _rtps(path).find("d:builtin/d:discovery_config", NS)
+
+    def seconds(name: str) -> float:
+        node = disc.find(f"d:{name}", NS)
+        return int(node.find("d:sec", NS).text) + int(node.find("d:nanosec", NS).text) * 1e-9
+
+    lease, announce = seconds("leaseDuration"), seconds("leaseAnnouncement")
+    assert (lease, announce) == (LEASE_S, ANNOUNCE_S) == (2, 0.25)
     assert int(_shm(path).find("d:port_queue_capacity", NS).text) == PORT_QUEUE == 1024
     check = int(_shm(path).find("d:healthy_check_timeout_ms", NS).text)
-    assert check == HEALTHY_CHECK_MS and 1000 < check < int(lease.text) * 1000
+    assert check == HEALTHY_CHECK_MS and 1000 * lease < check <= 3000 and lease >= 4 * announce
 
 
 def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):

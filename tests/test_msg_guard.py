@@ -198,3 +198,91 @@ def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
     runtime_dir().chmod(0o755)
     with pytest.raises(ChannelError, match="mode 0700"):
         SwitchServer.open(99)
+
+
+class _Lines:
+    """A logger that keeps what it is given (the guard's log calls)."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def warning(self, message: str) -> None:
+        self.lines.append(message)
+
+    info = error = debug = warning
+
+
+def test_forged_replayed_moved_and_garbage_messages_are_counted_and_never_decoded(
+        tmp_path, monkeypatch):
+    """The rejection path reads the trailer only: whatever fails authentication (or was seen
+    before) is dropped and counted per cause, and the guard's decode counter does not move;
+    its log grows by one line per power of ten of each (topic, cause)."""
+    rclpy = pytest.importorskip("rclpy", reason="the guard lives on the node side")
+    from rclpy.context import Context
+
+    from hexapod_common.core import topics as T
+    from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV
+    from hexapod_common.runtime import conversions as C
+    from hexapod_common.runtime.input_guard import InputGuard
+
+    path = new_key_file(tmp_path)
+    monkeypatch.setenv(KEY_ENV, str(path))
+    monkeypatch.setenv(AUTH_ENV, "on")
+    key = read_key_file(path)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0) % 100 + 101)
+    try:
+        node = rclpy.create_node("guard_reject_test", context=ctx,
+                                 start_parameter_services=False)
+        log = _Lines()
+        guard = InputGuard(node, log)
+        period = 1_000_000
+        z = np.zeros(12)
+
+        def state(stamp: int, value: float = 0.0) -> bytes:
+            return C.CODECS[T.JOINT_STATES].encode(stamp, "pd_pf", z + value, z, z)
+
+        genuine = Signer(key, T.JOINT_STATES)
+        first = genuine.sign(state(period))
+        assert guard.joint_state(T.JOINT_STATES, first, period) is not None
+        assert guard.decoded == 1
+        forces = Signer(key, T.FOOT_FORCES).sign(
+            C.CODECS[T.FOOT_FORCES].encode(period, "", z, z, z))
+        tampered = bytearray(genuine.sign(state(2 * period)))
+        tampered[40] ^= 0x01
+        same_seq = bytearray(first)
+        same_seq[40] ^= 0x01  # an accepted message's trailer on other content
+        cases = [
+            (first, M.REPLAYED),                                         # replayed copy
+            (Signer(os.urandom(32), T.JOINT_STATES).sign(state(3 * period)),
+             M.UNAUTHENTICATED),                                         # forged: other key
+            (forces, M.UNAUTHENTICATED),                                 # moved to a topic
+            (bytes(tampered), M.UNAUTHENTICATED),                        # altered in transit
+            (bytes(same_seq), M.UNAUTHENTICATED),                        # reuses a sequence
+            (state(4 * period), M.UNAUTHENTICATED),                      # no trailer at all
+            (b"", M.UNAUTHENTICATED), (b"\x00\x01\x00\x00", M.UNAUTHENTICATED),
+            (os.urandom(600), M.UNAUTHENTICATED),                        # garbage
+        ]
+        for data, cause in cases:
+            before = guard.drops.counts.get((T.JOINT_STATES, cause), 0)
+            assert guard.joint_state(T.JOINT_STATES, data, period) is None
+            assert guard.drops.counts[(T.JOINT_STATES, cause)] == before + 1, data[:16]
+        assert guard.decoded == 1  # not one of them was decoded
+        assert guard.drops.total == len(cases)
+        # a flood: 1000 forged messages more, still never decoded, and logged sparingly
+        forger = Signer(os.urandom(32), T.JOINT_STATES)
+        lines = len(log.lines)
+        for k in range(1000):
+            assert guard.joint_state(T.JOINT_STATES, forger.sign(state(k * period)),
+                                     period) is None
+        assert guard.decoded == 1
+        assert guard.drops.counts[(T.JOINT_STATES, M.UNAUTHENTICATED)] == len(cases) - 1 + 1000
+        # 1007 drops of one cause: lines at 10, 100 and 1000 only
+        assert len(log.lines) - lines == 3, log.lines[lines:]
+        # the genuine sender's next message still goes through
+        assert guard.joint_state(T.JOINT_STATES, genuine.sign(state(5 * period)),
+                                 period) is not None
+        assert guard.decoded == 2
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

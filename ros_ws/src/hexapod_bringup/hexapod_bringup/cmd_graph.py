@@ -42,7 +42,6 @@ from hexapod_common.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PA
                                                 PortFence, domain_id_from_env, shm_locks,
                                                 private_profile, remove_dead_shm,
                                                 unused_participant_id)
-from hexapod_common.runtime.dds_goodbye import prefix_from_log, send_goodbye
 from hexapod_common.runtime.lifeline import PARENT_ENV
 
 from .cli_args import OneLineParser, number
@@ -136,7 +135,7 @@ class GraphProcesses:
         self._locks: dict[str, list[Path]] = {}
         self._locks_due: dict[str, float] = {}  # monotonic s: next look at a node's locks
         self._fence = PortFence()
-        self._said_goodbye: set[str] = set()
+        self._fenced: set[str] = set()
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> subprocess.Popen[bytes]:
@@ -173,7 +172,7 @@ class GraphProcesses:
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
                        str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
-        self._said_goodbye.discard(name)
+        self._fenced.discard(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log
         self.procs[name] = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT,
@@ -182,9 +181,9 @@ class GraphProcesses:
 
     def poll(self, name: str) -> int | None:
         """The exit code of process ``name``, None while it runs. While it runs, notes the
-        listener locks of its shared-memory ports; once it has died by a signal, says its DDS
-        goodbye for it (dds_goodbye.py: its peers drop it at once instead of after its
-        lease) and holds those locks (:meth:`fenced`)."""
+        listener locks of its shared-memory ports; once it has died by a signal (its peers
+        drop it when its participant's lease ends: dds_profile.py), holds those locks
+        (:meth:`fenced`)."""
         proc = self.procs[name]
         code = proc.poll()
         if code is None:
@@ -201,11 +200,8 @@ class GraphProcesses:
         return code
 
     def _ended(self, name: str, code: int) -> None:
-        if code < 0 and name not in self._said_goodbye:  # died by a signal: no goodbye
-            self._said_goodbye.add(name)
-            prefix = prefix_from_log(self.log(name))
-            if prefix is not None:  # its peers drop it now, not when its lease (5 s) ends
-                send_goodbye(prefix, domain_id_from_env(self.env))
+        if code < 0 and name not in self._fenced:  # died by a signal: no goodbye to peers
+            self._fenced.add(name)
             self._fence.hold(self._locks.get(name, ()))  # keep new participants off its ids
         self._locks.pop(name, None)
         self._locks_due.pop(name, None)

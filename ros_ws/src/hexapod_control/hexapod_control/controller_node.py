@@ -28,8 +28,10 @@ every ``IDLE_DRAIN`` s, checking only those from the newest state's tick on: at 
 then has at most a few ms of inputs to take in.
 Every state of ours is answered, in order, late rather than never (answering only the
 newest state was tried: at the same share of on-time ticks it left ticks unanswered at
-switches). Inputs of ticks before every state still to answer are not needed: they are
-skipped unchecked and counted (``skipped_inputs`` in the status and the end summary).
+switches). Every input is authenticated on arrival (a forged or replayed one is dropped
+and counted without being decoded); inputs of ticks before every state still to answer are
+not needed: they are skipped undecoded and counted (``skipped_inputs`` in the status and
+the end summary).
 """
 from __future__ import annotations
 
@@ -113,9 +115,10 @@ class ControllerNode(LifecycleNode):
         self.in_charge = False  # named by the newest state
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
-        # Inputs taken while not in charge, not checked yet: stamp (as the data claims it)
-        # -> the serialized sample (see _on_input).
-        self.unchecked: dict[str, dict[int, bytes]] = {T.REFERENCE: {}, T.FOOT_FORCES: {}}
+        # Inputs taken while not in charge, authenticated but not decoded yet: stamp -> the
+        # serialized sample and its payload's size (see _on_input).
+        self.unchecked: dict[str, dict[int, tuple[bytes, int]]] = {T.REFERENCE: {},
+                                                                   T.FOOT_FORCES: {}}
         # States of ours waiting for their reference or foot forces (answered, in order, as
         # soon as those are there, also after newer states: late beats never in realtime).
         self.pending: dict[int, C.JointStateView] = {}
@@ -238,15 +241,19 @@ class ControllerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ per tick
     def _on_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
-        """A reference or foot-force sample: buffered by stamp (the newest MAX_BUFFERED);
-        one of a tick before the newest state is not needed, and not even checked.
+        """A reference or foot-force sample: authenticated on arrival (a forged or replayed
+        one is dropped and counted, never decoded), then buffered by stamp (the newest
+        MAX_BUFFERED); one of a tick before the newest state is not needed, and not decoded.
 
-        Not in charge, a sample is kept unchecked (by the stamp it claims, one per stamp,
-        MAX_UNCHECKED stamps at most) and checked only once a state of ours needs it
-        (:meth:`_check_unchecked`): checking the ~5 ms of inputs an idle drain takes cost
-        0.2-0.5 ms, and a state that named this controller while a drain ran waited for it
-        (the switch tick's command came late at 20 of 50 switches at 1 kHz,
+        Not in charge, a sample is kept undecoded (by its stamp, one per stamp,
+        MAX_UNCHECKED stamps at most) and decoded and checked only once a state of ours
+        needs it (:meth:`_check_unchecked`): checking the ~5 ms of inputs an idle drain takes
+        cost 0.2-0.5 ms, and a state that named this controller while a drain ran waited for
+        it (the switch tick's command came late at 20 of 50 switches at 1 kHz,
         docs/benchmarks.md)."""
+        n = self.guard.payload_size(topic, data)
+        if n is None:
+            return
         stamp = header_stamp(data)
         if 0 <= stamp < self.input_floor:
             self.skipped_inputs += 1
@@ -254,9 +261,9 @@ class ControllerNode(LifecycleNode):
         if not self.in_charge:
             held = self.unchecked[topic]
             if stamp not in held and len(held) < MAX_UNCHECKED:
-                held[stamp] = data
+                held[stamp] = (data, n)
                 return
-        self._check_input(topic, buf, data)
+        self._check_input(topic, buf, data, n)
 
     def _check_unchecked(self, stamp: int | None = None) -> None:
         """Check the inputs kept unchecked: those of tick ``stamp`` (ns), or all (None;
@@ -264,23 +271,24 @@ class ControllerNode(LifecycleNode):
         for topic, buf in ((T.REFERENCE, self.refs), (T.FOOT_FORCES, self.forces)):
             held = self.unchecked[topic]
             if stamp is not None:
-                data = held.pop(stamp, None)
-                if data is not None:
-                    self._check_input(topic, buf, data)
+                got = held.pop(stamp, None)
+                if got is not None:
+                    self._check_input(topic, buf, *got)
                 continue
             if not held:
                 continue
             items = sorted(held.items())
             held.clear()
-            for s, data in items:
+            for s, got in items:
                 if 0 <= s < self.input_floor:
                     self.skipped_inputs += 1
                 else:
-                    self._check_input(topic, buf, data)
+                    self._check_input(topic, buf, *got)
 
-    def _check_input(self, topic: str, buf: dict[int, Any], data: bytes) -> None:
-        """Check one input (the guard) and buffer it by stamp."""
-        msg = self.guard.joint_state(topic, data, self.period_ns, self.window)
+    def _check_input(self, topic: str, buf: dict[int, Any], data: bytes, size: int) -> None:
+        """Decode and check one authenticated input (the guard) and buffer it by stamp."""
+        msg = self.guard.authenticated_joint_state(topic, data, size, self.period_ns,
+                                                   self.window)
         if msg is None:
             return
         buf[msg.stamp_ns] = msg

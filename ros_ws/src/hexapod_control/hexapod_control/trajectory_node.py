@@ -79,7 +79,7 @@ class TrajectoryNode(Node):
         self.states = self.loop.subscribe(
             JointState, T.JOINT_STATES, self._on_clock,
             C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH), wake=self.interval == 0,
-            newest=lambda data: self.guard.payload(T.JOINT_STATES, data))
+            newest=lambda data: self.guard.payload_size(T.JOINT_STATES, data))
         if self.interval > 0:
             self.loop.set_deadline(time.monotonic() + self.interval, self._poll)
         self.announcer = ParamAnnouncer(self, self.period, lambda: self.next_tick)

@@ -62,6 +62,10 @@ EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "markers": ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES), ()),
 }
 STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
+#: Wall s between two looks at the local switch channel (a socket read per look, ~5-10 us
+#: each here) and at whether /clock has a subscriber (publishing to none costs ~15 us):
+#: per tick at 1-2 kHz lockstep that was a few % of the sim's thread.
+LOOK_PERIOD = 0.002
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
 JOINED_MATCH_WAIT = 0.5  # s tick 0 waits more for a joined controller in charge (no service)
@@ -166,6 +170,8 @@ class SimNode(Node):
             self.log.warning(f"no local switch channel ({err}); `hexapod switch` uses the "
                              f"ROS parameter service instead")
         self.state_clients: dict[str, Any] = {}
+        self.next_look = 0.0  # monotonic s: the next look at the channel and /clock
+        self.clock_wanted = True  # /clock has a subscriber (looked at every LOOK_PERIOD)
         # (controller, reply to, future, monotonic time to give up)
         self.state_checks: list[tuple[str, str, Any, float]] = []
         self.steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -432,8 +438,10 @@ class SimNode(Node):
                 cs[topic].encode(stamp, frame_id, c.position, c.velocity, c.effort))))
         # rosgraph_msgs/Clock is a bounded type: Fast DDS refuses a sample longer than 12
         # bytes, so /clock carries no tag. No node of the graph acts on it (the trajectory
-        # generator follows the authenticated states; the recorder writes /clock from them).
-        out.append((self.pub[T.CLOCK], C.encode_clock(stamp)))
+        # generator follows the authenticated states; the recorder writes /clock from them):
+        # sent while someone subscribes (nodes on sim time, ROS tools).
+        if self.clock_wanted:
+            out.append((self.pub[T.CLOCK], C.encode_clock(stamp)))
         self.prepared = (k, stamp, out)
 
     def _send(self) -> None:
@@ -491,7 +499,13 @@ class SimNode(Node):
         take ~0.2-0.8 ms of the sim's thread, which served here delayed the next tick's
         states (the switch tick's command came late at 20 of 50 switches at 1 kHz,
         docs/benchmarks.md). The switch then takes effect at the following boundary."""
-        if self.channel is not None:
+        now = time.monotonic()
+        if now >= self.next_look:
+            self.next_look = now + LOOK_PERIOD
+            self.clock_wanted = self.pub[T.CLOCK].get_subscription_count() > 0
+            if self.channel is not None:
+                self.after_send.append(self._serve_channel)
+        elif self.state_checks:
             self.after_send.append(self._serve_channel)
         if self.controller_params.pending:
             self.after_send.append(self.controller_params.poll)

@@ -705,21 +705,27 @@ class JointStateCodec:
         o2 = o1 + 8 * self.n + len(gap_e)
         return _Frame(middle[4 + flen:] + gap_p, (gap_v, gap_e), (o0, o1, o2), o2 + 8 * self.n)
 
-    def decode(self, data: bytes) -> JointStateView:
-        """Stamp, frame_id and arrays of a serialized JointState of this topic."""
+    def decode(self, data: bytes, size: int | None = None) -> JointStateView:
+        """Stamp, frame_id and arrays of a serialized JointState of this topic: the first
+        ``size`` bytes of ``data`` (default all; the rest, e.g. an authentication trailer,
+        is not looked at and nothing is copied)."""
+        if size is None:
+            size = len(data)
+        elif size != len(data):
+            size = min(size, len(data))
         try:
             (flen,) = _U32.unpack_from(data, 12)
-            frame_id = bytes(data[16:16 + flen - 1]).decode() if flen else ''
+            frame_id = bytes(data[16:min(16 + flen - 1, size)]).decode() if flen else ''
         except (struct.error, UnicodeDecodeError) as err:
             msg = f'not a serialized JointState: {err}'
             raise CdrError(msg) from err
         lay = self._frames.get(flen)
-        if lay is None and 16 + flen <= len(data):
+        if lay is None and 16 + flen <= size:
             lay = self._frames[flen] = self._frame(flen, frame_id)
         if lay is not None:
             o0, o1, o2 = lay.offsets
             gap_v, gap_e = lay.gaps
-        if (lay is not None and len(data) == lay.size and data[16 + flen:o0] == lay.head
+        if (lay is not None and size == lay.size and data[16 + flen:o0] == lay.head
                 and data[:2] == ENCAPSULATION[:2]
                 and data[o1 - len(gap_v):o1] == gap_v and data[o2 - len(gap_e):o2] == gap_e):
             sec, nsec = _STAMP.unpack_from(data, 4)
@@ -727,6 +733,8 @@ class JointStateCodec:
             return JointStateView(sec * NS + nsec, frame_id, np.frombuffer(data, '<f8', n, o0),
                                   np.frombuffer(data, '<f8', n, o1),
                                   np.frombuffer(data, '<f8', n, o2))
+        if size != len(data):
+            data = data[:size]
         try:
             full = _decode_joint_state(_Reader(data, errors='strict'))
         except UnicodeDecodeError as err:

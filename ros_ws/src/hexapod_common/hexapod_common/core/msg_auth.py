@@ -46,6 +46,7 @@ TRAILER_BYTES = SENDER_BYTES + 8 + TAG_BYTES  # 32: keeps 8-byte alignment
 MAX_SENDERS = 256  # senders remembered per topic (a restarted node is a new sender)
 _SEQ = struct.Struct("<Q")
 _SEQ_MASK = (1 << 56) - 1
+_ZEROS = bytes(8)
 
 
 class AuthError(HexapodError):
@@ -129,62 +130,86 @@ class Signer:
         if tr is not None:
             tr.mark(trace.SIGN0, self.topic, trace.header_stamp(payload))
         self.seq += 1
-        pad = -len(payload) % 8
-        body = payload + b"\0" * pad if pad else payload
-        head = self.sender + _SEQ.pack(self.seq | pad << 56)
+        n = len(payload)
+        pad = _ZEROS[:-n % 8]
+        head = self.sender + _SEQ.pack(self.seq | len(pad) << 56)
         h = self._base.copy()
-        h.update(body)
+        h.update(payload)
+        h.update(pad)
         h.update(head)
-        out = b"".join((body, head, h.digest()))
+        out = b"".join((payload, pad, head, h.digest()))  # the one copy of the payload
         if tr is not None:
             tr.mark(trace.SIGN1, self.topic)
         return out
 
 
+def _hash(data: bytes) -> int:
+    """Python's (per-process keyed) hash of a message's bytes."""
+    return hash(data if type(data) is bytes else bytes(data))
+
+
 class Verifier:
-    """Checks and strips the trailer of the messages received on ``topic``."""
+    """Checks and strips the trailer of the messages received on ``topic``.
+
+    :meth:`check` reads the trailer's sender and sequence first: a sequence seen before from
+    that sender is refused without hashing (a replayed copy, or a different message that
+    claims an authentic message's sequence: then it cannot be authentic, since a signer
+    never repeats a sequence); only a message with a new sequence pays for the tag.
+    """
 
     def __init__(self, key: bytes, topic: str) -> None:
         self.topic = topic
         self._base = _base(key, topic)
         self.last: dict[bytes, int] = {}  # sender -> newest sequence accepted
-        #: sender -> the sequences accepted within REPLAY_WINDOW below the newest: a message
-        #: may arrive after a newer one (a replayed copy can overtake the original in a
-        #: reader's queue), so "not seen before" is the test, not "newer than the newest".
-        self.seen: dict[bytes, set[int]] = {}
+        #: sender -> {sequence: hash(message)} of the messages accepted within REPLAY_WINDOW
+        #: below the newest: a message may arrive after a newer one (a replayed copy can
+        #: overtake the original in a reader's queue), so "not seen before" is the test, not
+        #: "newer than the newest"; the (process-keyed) hash tells an exact copy (replayed)
+        #: from another message that claims the same sequence (unauthenticated).
+        self.seen: dict[bytes, dict[int, int]] = {}
 
-    def verify(self, data: bytes) -> bytes:
-        """The payload of an authentic, new message; raises Rejected otherwise."""
+    def check(self, data: bytes) -> int:
+        """The payload's length in ``data`` (an authentic, new message: bytes
+        ``[0, length)``); raises Rejected otherwise. Nothing is copied."""
         n = len(data) - TRAILER_BYTES
         if n < 0:
-            raise Rejected("unauthenticated")
-        h = self._base.copy()
-        h.update(memoryview(data)[:n + SENDER_BYTES + 8])
-        if not secrets.compare_digest(h.digest(), data[n + SENDER_BYTES + 8:]):
             raise Rejected("unauthenticated")
         sender = data[n:n + SENDER_BYTES]
         (word,) = _SEQ.unpack_from(data, n + SENDER_BYTES)
         seq, pad = word & _SEQ_MASK, word >> 56
-        if pad > 7 or pad > n:
+        if pad > 7 or pad > n or seq == 0:
             raise Rejected("unauthenticated")
-        newest = self.last.get(sender, 0)
         seen = self.seen.get(sender)
-        if seq <= newest - REPLAY_WINDOW or (seen is not None and seq in seen) or seq == 0:
-            raise Rejected("replayed")
+        if seen is not None:
+            known = seen.get(seq)
+            if known is not None:
+                raise Rejected("replayed" if known == _hash(data) else "unauthenticated")
+            newest = self.last[sender]
+            if seq <= newest - REPLAY_WINDOW:
+                raise Rejected("replayed")
+        else:
+            newest = 0
+        h = self._base.copy()
+        h.update(memoryview(data)[:n + SENDER_BYTES + 8])
+        if not secrets.compare_digest(h.digest(), data[n + SENDER_BYTES + 8:]):
+            raise Rejected("unauthenticated")
         if seen is None:
             if len(self.last) >= MAX_SENDERS:
                 old = next(iter(self.last))
                 del self.last[old]
                 self.seen.pop(old, None)
-            seen = self.seen[sender] = set()
-        seen.add(seq)
+            seen = self.seen[sender] = {}
+            self.last[sender] = 0
+        seen[seq] = _hash(data)
         if seq > newest:
             self.last[sender] = newest = seq
-        else:
-            self.last.setdefault(sender, newest)
         if len(seen) > 2 * REPLAY_WINDOW:
-            self.seen[sender] = {x for x in seen if x > newest - REPLAY_WINDOW}
-        return data[:n - pad]
+            self.seen[sender] = {x: v for x, v in seen.items() if x > newest - REPLAY_WINDOW}
+        return n - pad
+
+    def verify(self, data: bytes) -> bytes:
+        """The payload of an authentic, new message (a copy); raises Rejected otherwise."""
+        return data[:self.check(data)]
 
 
 #: How far (in messages of one sender) an authentic message may arrive behind the newest
@@ -205,6 +230,10 @@ class Unsigned:
             tr.mark(trace.SIGN0, self.topic, trace.header_stamp(payload))
             tr.mark(trace.SIGN1, self.topic)
         return payload
+
+    def check(self, data: bytes) -> int:
+        """The length of ``data``: all of it is the payload."""
+        return len(data)
 
     def verify(self, data: bytes) -> bytes:
         """``data`` itself."""

@@ -22,10 +22,15 @@ from typing import IO, Iterable, Mapping
 #: Port queue (messages) of every graph process's shared-memory port (see below).
 PORT_QUEUE = 1024
 #: How long (ms) a sender waits for the listeners of a shared-memory port to show they are
-#: alive before declaring the port broken (Fast DDS's default: 1000; see below: 10 s, longer
-#: than the lease, removed a killed node's cost to the loop but failed the test suite; the
-#: launcher's goodbye for a killed node now removes it for the graph's own nodes).
+#: alive before declaring the port broken (Fast DDS's default: 1000). Longer than the
+#: participants' lease (:data:`LEASE_S`), so that a node killed without a goodbye is dropped
+#: by its peers before any of them declares its port broken (see below); 10 s (with a 5 s
+#: lease) made the test suite fail in 3 of 7 runs, so it stays near the default.
 HEALTHY_CHECK_MS = 3000
+#: A participant's lease (s) and how often it announces itself (s): see
+#: :data:`FASTDDS_PROFILE`.
+LEASE_S = 2
+ANNOUNCE_S = 0.25
 
 #: Most samples a reader of the graph holds untaken. Fast DDS's default (5000) applies
 #: whatever the subscription's depth: a recorder that took nothing for a while (its main
@@ -41,33 +46,27 @@ READER_MAX_SAMPLES = 20000
 #: the lost samples then waited for the next heartbeat: up to 3 s, which stalled the loop
 #: for 1.5 s in realtime runs), and writers that send heartbeats every 50 ms and answer
 #: NACKs at once, so that a sample lost anyway is repaired within a few ticks. UDP stays on
-#: the loopback interface. A participant's lease is 5 s (announced every 1 s; Fast DDS's
-#: default is 20 s): a node that dies without saying goodbye (SIGKILL) is dropped by the
-#: others within 5 s, so the graph stops sending it samples.
+#: the loopback interface.
 #:
-#: Until then its readers stay matched and every sample for them goes into its
-#: shared-memory port, where nobody takes it. Once a sender's watchdog has declared that
-#: port broken (no sign of its listener for the health check's time), every sample sent to
-#: it re-creates the port (open, mmap, munmap): with Fast DDS's 1 s check, ~28000-34000
-#: `openat` calls in the sim from ~1.5 s after an idle controller's SIGKILL until its lease
-#: ended, the sim's CPU time up ~90 % meanwhile; with a 3 s check (the previous profile)
-#: ~6000, and 92.7-98.7 % of the ticks after the kill on time at 1 kHz against 99.95-99.97 %
-#: without it (eighth stop). A check longer than the lease (10 s) removed that cost (99.99-
-#: 100.00 % after the kill in three A/B pairs): the dead reader is dropped before any
-#: watchdog fires. It was tried twice and dropped twice: the whole test suite then failed
-#: in 3 of 7 fresh-clone or local runs (a node missing from the sim's view of the graph, a
-#: service not answering, a recorder's topics ending at different ticks), against none
-#: with 3 s; the cause is not known (a sender needs 10 s instead of 3 to give up on a port
-#: whose listener is gone, discovery's included). With 3 s the re-creation starts later
-#: and lasts ~1 s before the lease ends. Meanwhile the port's queue fills up and each
-#: buffer it holds stays allocated in the sender's shared-memory segment, which Fast DDS
-#: walks at every allocation (its ``recover_buffers``): the reason for a 1024-deep queue
-#: rather than 4096.
-#:
-#: None of this happens any more for the graph's own nodes: the launcher sends a killed
-#: node's goodbye for it (dds_goodbye.py), and its peers drop it 0.04-0.08 s after its
-#: death, long before any health check fires (ninth stop). It still happens for a node
-#: started by hand and killed, and the check stays at 3 s for that case.
+#: A node killed without a goodbye (SIGKILL, a crash): its peers keep it until its
+#: participant's lease ends, and until then every sample for its readers goes into its
+#: shared-memory port, where nobody takes it. Once a sender's watchdog has declared that port
+#: broken (no sign of its listener for :data:`HEALTHY_CHECK_MS`), every sample sent to it
+#: re-creates the port (open, mmap, munmap): with the earlier 5 s lease (announced every 1 s)
+#: that cost the sim ~60 % of a core instead of ~44 % and 1-1.5 s of a realtime 1 kHz run at
+#: 55-80 % of ticks on time, from ~3.5 s after an idle controller's SIGKILL until its lease
+#: ended at ~4.6-4.8 s (``scripts/bench_switch.py --kill-idle 3``, two runs). So the lease
+#: is :data:`LEASE_S` = 2 s, shorter than the health check: the dead participant is dropped
+#: 1.8 s after the kill, before any watchdog fires, and no interval of those runs fell below
+#: 95 % on time (two runs, side by side with the 5 s lease). It is announced every
+#: :data:`ANNOUNCE_S` = 0.25 s, 8 times per lease: an earlier try of 1-2 s leases announced
+#: every 1 s (2 announcements per lease) made a loaded peer drop a live node twice. The
+#: more frequent announcements (one small datagram per peer every 0.25 s) showed no cost in
+#: those runs: the runs without a kill made 99.2-99.8 % on time after the kill tick with
+#: either lease, the sim at 41-45 % of a core.
+#: Meanwhile the dead port's queue fills up and each buffer it holds stays allocated in the
+#: sender's shared-memory segment, which Fast DDS walks at every allocation (its
+#: ``recover_buffers``): the reason for a 1024-deep queue rather than 4096.
 #:
 #: A process that takes the dead one's participant id opens its port as the dead process
 #: left it. Restarted nodes and the graph's tools take ids whose ports do not exist
@@ -78,12 +77,6 @@ READER_MAX_SAMPLES = 20000
 #: signal (:class:`PortFence`), and deletes those ports once the graph is stopped; such a
 #: process skips the id (Fast DDS prints one ``Failed init_port ... open_and_lock_file
 #: failed`` line for it).
-#:
-#: Shorter leases were tried and dropped: with 1-2 s the dead controller cost 17-824 late
-#: ticks, but under a loaded lockstep run (a recorder joining) a live node was twice dropped
-#: by a peer whose lease ran out before its announcements were processed, and the peer
-#: never matched its endpoints again (possibly the shared-memory port reuse that
-#: :func:`private_profile` now avoids for restarts, which was not known then).
 FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -110,8 +103,9 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
         <useBuiltinTransports>false</useBuiltinTransports>
         <builtin>
           <discovery_config>
-            <leaseDuration><sec>5</sec><nanosec>0</nanosec></leaseDuration>
-            <leaseAnnouncement><sec>1</sec><nanosec>0</nanosec></leaseAnnouncement>
+            <leaseDuration><sec>{LEASE_S}</sec><nanosec>0</nanosec></leaseDuration>
+            <leaseAnnouncement><sec>{int(ANNOUNCE_S)}</sec>\
+<nanosec>{round(ANNOUNCE_S % 1 * 1e9)}</nanosec></leaseAnnouncement>
           </discovery_config>
         </builtin>
       </rtps>
@@ -322,8 +316,8 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     return path
 
 
-__all__ = ["DOMAIN_PARTICIPANT_IDS", "FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
-           "HEALTHY_CHECK_MS", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
+__all__ = ["ANNOUNCE_S", "DOMAIN_PARTICIPANT_IDS", "FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
+           "HEALTHY_CHECK_MS", "LEASE_S", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
            "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
            "private_profile", "remove_dead_shm", "shm_locks", "unicast_ports",
            "unused_participant_id"]

@@ -24,7 +24,12 @@ SingleThreadedExecutor, 0.28-0.34 ms with this loop). So each node splits its en
   the service's callback, completes a client's future with its response, or calls the
   timer's callback, as rclpy's executor would, but without the
   executor's rebuilding of a wait set from every entity of the node (0.5-0.7 ms a time
-  here: a `ros2 param set` or the status timer then made the realtime loop miss a tick);
+  here: a `ros2 param set` or the status timer then made the realtime loop miss a tick).
+  While hot messages keep the loop busy, only every :data:`OTHERS_PERIOD` (5 ms) does a wait
+  include them; the waits in between are on the hot subscriptions alone: each entity in a
+  wait set costs rmw_wait CPU at every wake-up, and the five nodes' main threads used
+  0.79-0.93 ms of CPU per lockstep tick at 1 kHz this way against 1.03 ms with every entity
+  in every wait (two pairs of ``bench_graph.py --breakdown`` runs, alternating);
 * everything else (the time source and other executor-run subscriptions, events, guard
   conditions, coroutine callbacks) stays with a standard ``SingleThreadedExecutor``, run
   once every ``service_period`` (and when a coroutine callback is ready).
@@ -69,6 +74,13 @@ from .dds_profile import (FASTDDS_PROFILE, HAND_PARTICIPANT_IDS, domain_id_from_
 RawCallback = Callable[[bytes], Any]  # ``newest`` subscriptions: True if accepted
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
 MAX_WAIT = 0.1
+#: Wall s between two waits that include the node's services, clients and timers while
+#: hot messages keep the loop busy (the waits in between are on the hot subscriptions
+#: alone). Each entity in a wait set costs rmw_wait CPU at every wake-up: a lifecycle node's
+#: 13 services added ~12-20 us of CPU to each wait here (cold caches, 28 us with the
+#: subscription alone), at every tick of every node; a request now waits at most this long
+#: while the graph runs (an idle loop waits on everything).
+OTHERS_PERIOD = 0.005
 
 
 class _NeverExecuted(CallbackGroup):
@@ -125,7 +137,9 @@ class HotLoop:
         #: Messages taken but never given to their callback, per topic: a newer one of a
         #: ``newest`` subscription was accepted at the same wake-up.
         self.superseded: dict[str, int] = {}
-        self._wait_set: Any = None
+        self._wait_set: Any = None  # the hot subscriptions and the entities the loop serves
+        self._hot_set: Any = None  # the hot subscriptions alone (see OTHERS_PERIOD)
+        self._others_due = 0.0  # monotonic s: the next wait includes services, timers, ...
         self._waking: list[_HotSub] = []  # the subscriptions in the wait set
         self._others: tuple[list[Any], list[Any], list[Any]] = ([], [], [])
         # pointer -> service / timer the loop serves itself (module doc)
@@ -234,10 +248,14 @@ class HotLoop:
         self._wait_set = _rclpy.WaitSet(len(self._waking), 0, len(self._others[2]),
                                         len(self._others[1]), len(self._others[0]), 0,
                                         node.context.handle)
+        self._hot_set = (_rclpy.WaitSet(len(self._waking), 0, 0, 0, 0, 0, node.context.handle)
+                         if self._waking else None)
+        self._others_due = 0.0
 
     def poll(self, timeout: float) -> None:
         """Wait up to ``timeout`` s for hot messages and run their callbacks; serve ready
-        services, clients and timers; run the deadline callback when due, and the executor
+        services, clients and timers (looked at every :data:`OTHERS_PERIOD` while hot
+        messages keep the loop busy); run the deadline callback when due, and the executor
         every ``service_period``."""
         if self._wait_set is None:
             self._rebuild()
@@ -246,17 +264,25 @@ class HotLoop:
         if self._deadline is not None:
             timeout = min(timeout, self._deadline - now)
         timeout = min(timeout, self._next_service - now)
-        ws = self._wait_set
-        ws.clear_entities()
-        for e in waking:
-            ws.add_subscription(e.handle)
-        services, clients, timers = self._others
-        for h in services:
-            ws.add_service(h)
-        for h in clients:
-            ws.add_client(h)
-        for h in timers:
-            ws.add_timer(h)
+        others = now >= self._others_due or not waking
+        if others:
+            ws = self._wait_set
+            ws.clear_entities()
+            for e in waking:
+                ws.add_subscription(e.handle)
+            services, clients, timers = self._others
+            for h in services:
+                ws.add_service(h)
+            for h in clients:
+                ws.add_client(h)
+            for h in timers:
+                ws.add_timer(h)
+        else:
+            timeout = min(timeout, self._others_due - now)
+            ws = self._hot_set
+            ws.clear_entities()
+            for e in waking:
+                ws.add_subscription(e.handle)
         ws.wait(max(0, int(timeout * 1e9)))
         tr = trace.TRACER
         if tr is not None:
@@ -269,15 +295,22 @@ class HotLoop:
                     if self._wait_set is None:  # a callback changed the subscriptions
                         break
         run_executor = False
-        for kind, own, serve in (('service', self._services, _serve_request),
-                                 ('client', self._clients, _take_response),
-                                 ('timer', self._timers, _call_timer)):
-            for ptr in ws.get_ready_entities(kind):
-                entity = own.get(ptr)
-                if entity is None:  # a coroutine callback: the executor's
-                    run_executor = True
-                else:
-                    serve(entity)
+        if others:
+            served = False
+            for kind, own, serve in (('service', self._services, _serve_request),
+                                     ('client', self._clients, _take_response),
+                                     ('timer', self._timers, _call_timer)):
+                for ptr in ws.get_ready_entities(kind):
+                    served = True
+                    entity = own.get(ptr)
+                    if entity is None:  # a coroutine callback: the executor's
+                        run_executor = True
+                    else:
+                        serve(entity)
+            # Woken by hot messages: the others can wait a while. Woken by one of them, or
+            # by nothing: keep waiting on everything (a request may bring more).
+            if ready and not served:
+                self._others_due = time.monotonic() + OTHERS_PERIOD
         now = time.monotonic()
         if self._deadline is not None and now >= self._deadline:
             cb, self._deadline, self._deadline_cb = self._deadline_cb, None, None

@@ -1,8 +1,7 @@
 """The one ``main()`` of every node of the graph (ros2/examples' skeleton, with our hot loop).
 
 :func:`run_node`: ``rclpy.init`` without rclpy's signal handlers (a bad ROS command line is
-one line and exit code 2), build the node, log its DDS participant's GUID prefix
-(dds_goodbye.py), SIGINT/SIGTERM stop its loop
+one line and exit code 2), build the node, SIGINT/SIGTERM stop its loop
 (hot_loop.install_stop_signals), an optional start step, spin the loop; an error is one log
 line and an exit code (2: bad parameters or no key, ``ParameterError``/``AuthError``; 1:
 another error, a diverged model included); then the node's own finish step (summaries,
@@ -16,7 +15,6 @@ from typing import Any, Protocol, TypeVar
 
 from ..core.errors import DivergenceError, HexapodError, ParameterError
 from ..core.msg_auth import AuthError
-from .dds_goodbye import PREFIX_LOG, participant_prefix
 from .hot_loop import HotLoop, init_rclpy, install_stop_signals
 
 #: Exit code of bad parameters, a bad command line or a missing key.
@@ -58,9 +56,6 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
     caught: tuple[type[Exception], ...] = (HexapodError, *errors)
     try:
         node = make()
-        prefix = participant_prefix(node)
-        if prefix is not None:  # the launcher says this node's goodbye if a signal kills it
-            rclpy.logging.get_logger(name).info(f"{PREFIX_LOG} {prefix.hex()}")
         install_stop_signals(node.loop)
         if start is not None:
             start(node)
