@@ -139,13 +139,29 @@ def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path):
 def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path):
     bag, _ = switched_bag
     r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(bag),
-                        str(bag), "--csv", str(tmp_path / "a.csv"), "--plots",
+                        str(bag), "--csv", str(tmp_path / "a.csv"), "--out",
                         str(tmp_path / "plots")], capture_output=True, text=True,
                        timeout=300, check=True)
     assert "switches: pd_p at 2.000 s" in r.stdout
     assert (tmp_path / "a.csv").read_text().count("segment") == 4
     assert sorted(x.name for x in (tmp_path / "plots").iterdir()) == [
-        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png"]
+        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png", "indices.csv", "indices.json"]
+    assert f"analysis written to {tmp_path / 'plots'}" in r.stdout
+
+
+def test_analyze_writes_beside_the_bag_not_into_the_cwd(switched_bag, tmp_path):
+    bag, _ = switched_bag
+    cwd = tmp_path / "elsewhere"
+    cwd.mkdir()
+    r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(bag)],
+                       cwd=cwd, capture_output=True, text=True, timeout=300, check=True)
+    out = bag.with_name(bag.name + "_analysis")
+    assert list(cwd.iterdir()) == []
+    assert f"analysis written to {out}" in r.stdout
+    assert sorted(x.name for x in out.iterdir()) == [
+        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png", "indices.csv", "indices.json"]
+    assert (out / "indices.csv").read_text().count(",segment,") == 2
+    assert not (bag / "analysis").exists()
 
 
 def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path):
