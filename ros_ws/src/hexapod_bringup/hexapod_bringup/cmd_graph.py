@@ -415,15 +415,20 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
         end = time.monotonic() + timeout
         while not got and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.1)
-        nodes = sorted(n for n in node.get_node_names() if not n.startswith("hexapod_status_"))
+        # This process discovers the graph node by node: the status came once the sim was
+        # seen, the others may not be yet. The sim's status names what it sees.
+        ours = set(node.get_node_names())
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    if not got:
+    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"] if got else []
+    values = dict(sim[0].values) if sim else {}
+    theirs = {n for n in values.get("nodes", "").split(",") if n}
+    nodes = sorted(n for n in ours | theirs
+                   if not n.startswith(("hexapod_status_", "_")))
+    if not sim:
         return nodes, None
-    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"]
-    return nodes, (dict(sim[0].values) | {"level": sim[0].level, "message": sim[0].message}
-                   if sim else None)
+    return nodes, values | {"level": sim[0].level, "message": sim[0].message}
 
 
 # --------------------------------------------------------------------------- commands
@@ -447,10 +452,13 @@ def _cmd_status(args: argparse.Namespace) -> int:
         print(json.dumps({"nodes": nodes, "status": st}, indent=1))
         return 0
     print(f"nodes: {', '.join(nodes)}")
-    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}), "
+    end = st.get("end_tick", "none")
+    until = f" of {end}" if end not in ("none", "") else ", no end (until stopped)"
+    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}"
+          f"{until}), "
           f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"
           f" fallback {st['fallback']}, real-time factor {st['real_time_factor']}: "
-          f"{st['message']}")
+          + (st["message"] if st["level"] == "ok" else f"{st['level'].upper()}: {st['message']}"))
     return 0
 
 

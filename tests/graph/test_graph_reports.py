@@ -1,0 +1,120 @@
+"""What the graph tells a user is complete and current: `hexapod status` beside a running
+`scripts/run_graph.sh --duration 0` names every node, shows no end tick, warns of a publisher
+outside the graph while it is there and stops once it has left; the launcher's end summary
+reports the dropped messages and the outside publishers.
+
+One run serves every test of this module (real processes: the script, its five nodes, a
+rogue node and the `hexapod status` command line); the fixture records what each step saw
+and each test asserts one property of it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hexapod_common.core import topics as T
+
+from .conftest import hexapod_cli
+from .test_graph_exits import Script
+
+HOSTILE = Path(__file__).with_name("hostile_node.py")
+NODES = ["hexapod_sim", "metrics", "pd_p_controller", "pd_pf_controller",
+         "trajectory_generator"]
+ROGUE = "/rogue_node"
+
+
+def _status(s: Script, *args: str) -> subprocess.CompletedProcess:
+    r = hexapod_cli(s.domain, "status", "--timeout", "60", *args)
+    assert r.returncode == 0, r.stderr
+    return r
+
+
+def _status_json(s: Script) -> dict:
+    return json.loads(_status(s, "--json").stdout)
+
+
+@pytest.fixture(scope="module")
+def seen(tmp_path_factory):
+    """Run the scenario once; what each step saw."""
+    tmp = tmp_path_factory.mktemp("reports")
+    s = Script(tmp, "--duration", "0", "--no-switch")
+    out: dict = {}
+    rogue = None
+    try:
+        s.wait_log("hexapod_sim", "lockstep mode")
+        out["text"] = _status(s).stdout
+        out["json"] = _status_json(s)
+        # A rogue on the domain: its commands are dropped, it is named while it is there.
+        log = open(tmp / "rogue.log", "wb")
+        env = {**os.environ, "ROS_DOMAIN_ID": str(s.domain),
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        rogue = subprocess.Popen([sys.executable, str(HOSTILE), "rogue", "--out",
+                                  str(tmp / "rogue.json"), "--name", ROGUE[1:]],
+                                 env=env, stdout=log, stderr=subprocess.STDOUT,
+                                 start_new_session=True)
+        s.wait_log("hexapod_sim", f"publishers on {T.JOINT_COMMANDS} that are not nodes of "
+                   f"this graph: {ROGUE}", timeout=120)
+        out["with_rogue"] = _status_json(s)
+        rogue.send_signal(signal.SIGTERM)
+        assert rogue.wait(30) == 0
+        rogue = None
+        # Gone: the status stops naming it (the guard looks every 2 s while one is there;
+        # drops count as recent for 5 s).
+        end = time.monotonic() + 90
+        after = _status_json(s)
+        while (after["status"]["level"] != "ok" or ROGUE in after["status"]["outside_publishers"]
+               ) and time.monotonic() < end:
+            time.sleep(1.0)
+            after = _status_json(s)
+        out["rogue_gone"] = after
+        out["rogue_gone_text"] = _status(s).stdout
+        os.kill(s.proc.pid, signal.SIGINT)
+        out["code"] = s.wait()
+        out["stdout"], out["stderr"] = s.stdout(), s.stderr()
+    finally:
+        if rogue is not None:
+            rogue.kill()
+            rogue.wait()
+        s.kill_all()
+    return out
+
+
+def test_status_names_every_running_node(seen):
+    lines = seen["text"].splitlines()
+    nodes = [line for line in lines if line.startswith("nodes: ")]
+    assert nodes, seen["text"]
+    assert [n for n in nodes[0][len("nodes: "):].split(", ")] == NODES
+    assert seen["json"]["nodes"] == NODES
+
+
+def test_status_of_a_run_without_duration_shows_no_end_tick(seen):
+    assert seen["json"]["status"]["end_tick"] == "none"
+    assert "no end (until stopped)" in seen["text"] and " of " not in seen["text"].split(
+        "(tick ")[1].split(")")[0]
+
+
+def test_status_warns_of_an_outside_publisher_only_while_it_is_there(seen):
+    st = seen["with_rogue"]["status"]
+    assert st["level"] == "warn" and ROGUE in st["outside_publishers"], st
+    assert f"publishers outside the graph: {T.JOINT_COMMANDS}: {ROGUE}" in st["message"]
+    gone = seen["rogue_gone"]["status"]
+    assert gone["level"] == "ok" and gone["outside_publishers"] == "none", gone
+    assert ROGUE in gone["outside_publishers_left"] and int(gone["dropped"]) > 0
+    assert "publishers outside the graph:" not in gone["message"]
+    assert "WARN" not in seen["rogue_gone_text"] and ROGUE not in seen["rogue_gone"]["nodes"]
+
+
+def test_end_summary_reports_dropped_messages_and_outside_publishers(seen):
+    assert seen["code"] == 0, seen["stderr"]  # --duration 0: Ctrl-C is the normal end
+    out = seen["stdout"].splitlines()
+    dropped = [line for line in out if line.startswith("  inputs: dropped sim ")]
+    assert dropped and f"{T.JOINT_COMMANDS} (unauthenticated)" in dropped[0], out
+    outside = [line for line in out if line.startswith("  publishers outside the graph: ")]
+    assert outside and f"{T.JOINT_COMMANDS}: {ROGUE}" in outside[0], out
