@@ -1,7 +1,8 @@
 """What the graph tells a user is complete and current: `hexapod status` beside a running
 `scripts/run_graph.sh --duration 0` names every node, shows no end tick, warns of a publisher
-outside the graph while it is there and stops once it has left; the launcher's end summary
-reports the dropped messages and the outside publishers.
+outside the graph while it is there and stops once it has left; Ctrl-C ends the run with the
+indices so far and the bag, and the end summary reports the dropped messages and the
+outside publishers.
 
 One run serves every test of this module (real processes: the script, its five nodes, a
 rogue node and the `hexapod status` command line); the fixture records what each step saw
@@ -22,7 +23,7 @@ import pytest
 from hexapod_common.core import topics as T
 
 from .conftest import hexapod_cli
-from .test_graph_exits import Script
+from .test_graph_exits import Script, table_rows
 
 HOSTILE = Path(__file__).with_name("hostile_node.py")
 NODES = ["hexapod_sim", "metrics", "pd_p_controller", "pd_pf_controller",
@@ -44,7 +45,7 @@ def _status_json(s: Script) -> dict:
 def seen(tmp_path_factory):
     """Run the scenario once; what each step saw."""
     tmp = tmp_path_factory.mktemp("reports")
-    s = Script(tmp, "--duration", "0", "--no-switch")
+    s = Script(tmp, "--duration", "0", "--no-switch", "--controller", "pd_p")
     out: dict = {}
     rogue = None
     try:
@@ -75,9 +76,11 @@ def seen(tmp_path_factory):
             after = _status_json(s)
         out["rogue_gone"] = after
         out["rogue_gone_text"] = _status(s).stdout
+        s.wait_log("metrics", "cycle 1 [1, 2] s")
         os.kill(s.proc.pid, signal.SIGINT)
         out["code"] = s.wait()
         out["stdout"], out["stderr"] = s.stdout(), s.stderr()
+        out["bag"] = s.bag
     finally:
         if rogue is not None:
             rogue.kill()
@@ -111,8 +114,17 @@ def test_status_warns_of_an_outside_publisher_only_while_it_is_there(seen):
     assert "WARN" not in seen["rogue_gone_text"] and ROGUE not in seen["rogue_gone"]["nodes"]
 
 
-def test_end_summary_reports_dropped_messages_and_outside_publishers(seen):
+def test_ctrl_c_prints_the_indices_so_far_and_the_bag(seen):
+    out, bag = seen["stdout"], seen["bag"]
     assert seen["code"] == 0, seen["stderr"]  # --duration 0: Ctrl-C is the normal end
+    rows = table_rows(out)
+    assert rows and rows[0].split()[0] == "pd_p", out
+    assert f"bag: {bag}" in out
+    assert (bag / "indices.json").exists() and (bag / "metadata.yaml").exists()
+
+
+def test_end_summary_reports_dropped_messages_and_outside_publishers(seen):
+    assert seen["code"] == 0, seen["stderr"]
     out = seen["stdout"].splitlines()
     dropped = [line for line in out if line.startswith("  inputs: dropped sim ")]
     assert dropped and f"{T.JOINT_COMMANDS} (unauthenticated)" in dropped[0], out
