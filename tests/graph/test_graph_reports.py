@@ -99,8 +99,8 @@ def test_status_names_every_running_node(seen):
 
 def test_status_of_a_run_without_duration_shows_no_end_tick(seen):
     assert seen["json"]["status"]["end_tick"] == "none"
-    assert "no end (until stopped)" in seen["text"] and " of " not in seen["text"].split(
-        "(tick ")[1].split(")")[0]
+    tick = seen["text"].split("(tick ")[1].split(")")[0]
+    assert tick.endswith("; runs until stopped") and " of " not in tick, seen["text"]
 
 
 def test_status_warns_of_an_outside_publisher_only_while_it_is_there(seen):

@@ -453,7 +453,7 @@ def _cmd_status(args: argparse.Namespace) -> int:
         return 0
     print(f"nodes: {', '.join(nodes)}")
     end = st.get("end_tick", "none")
-    until = f" of {end}" if end not in ("none", "") else ", no end (until stopped)"
+    until = f" of {end}" if end not in ("none", "") else "; runs until stopped"
     print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}"
           f"{until}), "
           f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"

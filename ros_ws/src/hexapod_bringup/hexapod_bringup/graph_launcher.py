@@ -3,8 +3,10 @@
 Runs the simulator, the trajectory generator, both controllers and the recorder (and
 optionally the markers node) as processes of one :class:`~.cmd_graph.GraphProcesses`,
 waits for the sim to finish (``--duration``) or for Ctrl-C / SIGTERM, stops every node,
-prints the indices of each controller segment and the bag's path, and exits with a code
-that says what went wrong (:data:`EXIT_CODES`).
+prints the sim's tick counts, the messages the sim and the recorder dropped and the
+publishers outside the graph they saw (:func:`inputs_lines`), the indices of each
+controller segment (noting live parameter changes, :func:`indices_lines`) and the bag's
+path, and exits with a code that says what went wrong (:data:`EXIT_CODES`).
 
 Before any node starts, the settings are checked the way ``hexapod simulate`` checks them
 (the same parser, the same messages, :mod:`.cli_args`): a bad option, an unknown or
