@@ -64,6 +64,13 @@ def test_progress_bar_with_eta_on_a_terminal_and_silent_otherwise():
         shown = _drain(master)
     os.close(master)
     assert "sweep" in shown and "ETA" in shown and "4/4" in shown
+    master, slave = os.openpty()  # a terminal that reports no size: a bar all the same
+    with os.fdopen(slave, "w") as tty:
+        progress_factory(True, tty)("sweep", 2)(2)
+        tty.flush()
+        shown = _drain(master)
+    os.close(master)
+    assert "sweep: 100%" in shown and "ETA" in shown and "2/2" in shown
     pipe = io.StringIO()
     update = progress_factory(True, pipe)("sweep", 4)
     update(4)

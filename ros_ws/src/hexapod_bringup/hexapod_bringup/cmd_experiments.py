@@ -5,6 +5,7 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any, Callable, TextIO
@@ -37,8 +38,13 @@ def progress_factory(enabled: bool, stream: TextIO | None = None
             return lambda n: None
         from tqdm import tqdm
 
+        try:  # a terminal that reports no size (a bare pty) would get an empty bar
+            sized = os.get_terminal_size(out.fileno()).columns > 0
+        except (AttributeError, OSError, ValueError):
+            sized = False
         bar = tqdm(total=total, desc=label, unit="run", file=out, leave=True,
-                   dynamic_ncols=True, bar_format=BAR_FORMAT)
+                   dynamic_ncols=sized, ncols=None if sized else 100,
+                   bar_format=BAR_FORMAT)
 
         def update(n: int) -> None:
             bar.update(n)
