@@ -37,3 +37,14 @@ def test_bad_input_is_one_line_and_nonzero(hexapod, args, message):
     assert r.returncode == 2
     assert message in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("at, where", [("2.5", "inside the window: the indices mix both"),
+                                       ("1.5", "before the window: the indices are the new")])
+def test_simulate_says_where_a_live_change_falls_against_the_indices_window(hexapod, at,
+                                                                            where):
+    r = hexapod("simulate", "--controller", "pd_p", "--duration", "3", "--set",
+                "sim.control_period=0.001", "--change", f"{at}:ground.scale=2.0")
+    assert r.returncode == 0, r.stderr
+    assert "window = [2, 3] s" in r.stdout
+    assert f"parameter change: ground.scale = 2.0 at {at} s ({where}" in r.stdout
