@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Run the ROS 2 node graph: simulator, trajectory generator, both controllers and the
-# recorder; print the indices of each controller segment and the bag's path.
+# recorder; print the sim's tick counts, the messages dropped and the publishers outside the
+# graph (sim and recorder), the indices of each controller segment (a note under a row whose
+# cycle spans or follows a live parameter change) and the bag's path.
 #
 # Default scenario: PD-P&F in charge, handing over to PD-P halfway, base ground, lockstep,
 # 6 simulated seconds (3 gait cycles per controller).

@@ -4,8 +4,13 @@
 # without a rebuild). Idempotent and fast when nothing changed: each step is
 # skipped while its stamp matches a hash of its inputs.
 #
+# Each step that runs (1/3 the venv, 2/3 the Python wheels, 3/3 the colcon build) says
+# so when it starts and how long it took when it ends, also with --quiet (then on stderr):
+# a first set-up takes minutes, and a step that says nothing looks like a hang.
+#
 # Usage: scripts/setup.sh [-q|--quiet] [-f|--force] [--relock]
-#   -q, --quiet  print only errors
+#   -q, --quiet  print only the steps that run (on stderr) and errors: silent when
+#                nothing is to do
 #   -f, --force  recreate .venv and ros_ws/{build,install} from scratch
 #   --relock     regenerate requirements.lock from requirements.txt in a
 #                throwaway venv (then run setup as usual)
@@ -26,12 +31,22 @@ for arg in "$@"; do
     -q|--quiet) quiet=1 ;;
     -f|--force) force=1 ;;
     --relock) relock=1 ;;
-    -h|--help) sed -n '2,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,17p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "setup.sh: unknown option '$arg' (try --help)" >&2; exit 2 ;;
   esac
 done
 
 say() { if (( ! quiet )); then echo "setup: $*"; fi; }
+# A step that runs: one line when it starts, one with its time when it ends (quiet or not).
+step_start() {
+  step_t0=$SECONDS
+  if (( quiet )); then echo "setup: $*" >&2; else echo "setup: $*"; fi
+}
+step_note() { if (( quiet )); then echo "setup: $*" >&2; else echo "setup: $*"; fi; }
+step_end() {
+  local line="setup: $* ($((SECONDS - step_t0)) s)"
+  if (( quiet )); then echo "$line" >&2; else echo "$line"; fi
+}
 die() { echo "setup: error: $*" >&2; exit 1; }
 # Run a command with its output in a log file; show the log's tail on failure.
 logged() {
@@ -77,23 +92,24 @@ fi
 if (( force )) || [[ ! -x "$venv/bin/python" || ! -f "$venv/pyvenv.cfg" ]]; then
   "$python" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' \
     || die "$python is not Python 3.11 (the ROS wheels are cp311): set HEXAPOD_PYTHON"
-  say "creating .venv with $("$python" -V 2>&1)"
+  step_start "[1/3] creating .venv with $("$python" -V 2>&1)"
   rm -rf "$venv"
   "$python" -m venv "$venv"
+  step_end "[1/3] .venv created"
 fi
 venv_key="$({ echo "$root"; cat "$venv/pyvenv.cfg" "$lock"; } | hash_of)"
 venv_stamp="$venv/.hexapod-setup.stamp"
 if [[ "$(cat "$venv_stamp" 2>/dev/null)" != "$venv_key" ]]; then
   rm -f "$venv_stamp"
-  say "pip install -r requirements.lock (a few minutes on a fresh venv)"
-  start=$SECONDS
+  step_start "[2/3] pip install -r requirements.lock (a few minutes on a fresh venv; log:" \
+    "$venv/pip.log)"
   if ! logged "$venv/pip.log" "$venv/bin/python" -m pip install -r "$lock"; then
-    say "the lock failed; falling back to requirements.txt"
+    step_note "[2/3] the lock failed; falling back to requirements.txt"
     logged "$venv/pip.log" "$venv/bin/python" -m pip install -r "$reqs" \
       || die "pip install failed"
   fi
   echo "$venv_key" >"$venv_stamp"
-  say "python deps ready ($((SECONDS - start)) s)"
+  step_end "[2/3] python deps ready"
 fi
 
 # --- 2. the colcon workspace ---------------------------------------------------
@@ -102,6 +118,7 @@ fi
 build_key="$({
   echo "$venv_key"
   cd "$ws/src"
+  shopt -s nullglob
   for f in */package.xml */setup.py */setup.cfg; do echo "== $f"; cat "$f"; done
   ls -1 -- */resource */*/config 2>/dev/null || true
   cd "$root/examples"  # example packages built with the workspace (examples/my_controller)
@@ -111,8 +128,7 @@ build_key="$({
 build_stamp="$ws/install/.hexapod-setup.stamp"
 if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] \
    || [[ "$(cat "$build_stamp" 2>/dev/null)" != "$build_key" ]]; then
-  say "colcon build --symlink-install (ros_ws)"
-  start=$SECONDS
+  step_start "[3/3] colcon build --symlink-install (ros_ws; log: $ws/log/setup-colcon.log)"
   rm -f "$build_stamp"
   if (( force )); then rm -rf "$ws/build" "$ws/install"; fi
   # Build against the venv only: no overlays from a previously sourced env.sh.
@@ -125,6 +141,6 @@ if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] 
       --event-handlers desktop_notification-
   ) || die "colcon build failed"
   echo "$build_key" >"$build_stamp"
-  say "workspace built ($((SECONDS - start)) s)"
+  step_end "[3/3] workspace built"
 fi
 say "ready: source scripts/env.sh"

@@ -1,7 +1,5 @@
 """Offline analysis: equals the engine, splits at switches, survives hundreds of bad bags."""
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -121,7 +119,7 @@ def test_fuzz_mutated_and_truncated_bags(tmp_path):
     assert outcomes["ok"] > 10 and outcomes["error"] > 10, outcomes
 
 
-def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path):
+def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path, hexapod):
     other = tmp_path / "other"
     with BagWriter(other) as w:
         w.write_joint_state("/arm/joint_states", 1, ["a"], [0.0], [0.0], [0.0])
@@ -129,26 +127,40 @@ def test_bag_of_other_topics_and_not_a_bag_give_one_line_errors(tmp_path):
     (tmp_path / "notabag" / "x.txt").write_text("hello")
     for target, message in [(other, "not a hexapod bag"), (tmp_path / "notabag", ""),
                             (tmp_path / "missing", "")]:
-        r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(target),
-                            "--no-plots"], capture_output=True, text=True, timeout=120)
+        r = hexapod("analyze", str(target), "--no-plots")
         assert r.returncode == 2, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
         assert message in r.stderr
 
 
-def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path):
+def test_analyze_cli_writes_tables_csv_and_plots(switched_bag, tmp_path, hexapod):
     bag, _ = switched_bag
-    r = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", str(bag),
-                        str(bag), "--csv", str(tmp_path / "a.csv"), "--plots",
-                        str(tmp_path / "plots")], capture_output=True, text=True,
-                       timeout=300, check=True)
+    r = hexapod("analyze", str(bag), str(bag), "--csv", str(tmp_path / "a.csv"), "--out",
+                str(tmp_path / "plots"))
+    assert r.returncode == 0, r.stderr
     assert "switches: pd_p at 2.000 s" in r.stdout
     assert (tmp_path / "a.csv").read_text().count("segment") == 4
     assert sorted(x.name for x in (tmp_path / "plots").iterdir()) == [
-        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png"]
+        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png", "indices.csv", "indices.json"]
+    assert f"analysis written to {tmp_path / 'plots'}" in r.stdout
 
 
-def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path):
+def test_analyze_writes_beside_the_bag_not_into_the_cwd(switched_bag, tmp_path, hexapod):
+    bag, _ = switched_bag
+    cwd = tmp_path / "elsewhere"
+    cwd.mkdir()
+    r = hexapod("analyze", str(bag), cwd=cwd)
+    assert r.returncode == 0, r.stderr
+    out = bag.with_name(bag.name + "_analysis")
+    assert list(cwd.iterdir()) == []
+    assert f"analysis written to {out}" in r.stdout
+    assert sorted(x.name for x in out.iterdir()) == [
+        "Tm11.png", "Tm12.png", "dxH.png", "dyH.png", "indices.csv", "indices.json"]
+    assert (out / "indices.csv").read_text().count(",segment,") == 2
+    assert not (bag / "analysis").exists()
+
+
+def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path, hexapod):
     from PIL import Image
 
     from hexapod_bringup.animation import load_frames
@@ -158,7 +170,7 @@ def test_animate_writes_a_gif_with_one_panel_per_segment(switched_bag, tmp_path)
     assert [s.controller for s in segments] == ["pd_pf", "pd_p"] and not truncated
     np.testing.assert_array_equal(segments[1].obs[0], r.obs[2000])
     out = tmp_path / "walk.gif"
-    subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "animate", str(bag), "--out",
-                    str(out), "--fps", "5"], check=True, capture_output=True, timeout=300)
+    r = hexapod("animate", str(bag), "--out", str(out), "--fps", "5")
+    assert r.returncode == 0, r.stderr
     with Image.open(out) as im:
         assert im.n_frames == 11 and im.size[0] > 2 * im.size[1]

@@ -1,7 +1,5 @@
 """The bag holds its parameters: checksummed MCAP records, the yaml mirror, changes at ticks."""
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -85,12 +83,9 @@ def test_a_killed_writer_leaves_the_parameter_records_readable(slow_bag, tmp_pat
     assert a.truncated and a.params_source == FROM_MCAP and a.params == sim.run.params
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "analyze", *args,
-                           "--no-plots"], capture_output=True, text=True, timeout=300)
 
 
-def test_a_flipped_parameter_record_in_the_mcap_is_refused(slow_bag, tmp_path):
+def test_a_flipped_parameter_record_in_the_mcap_is_refused(slow_bag, tmp_path, hexapod):
     bag, _ = slow_bag
     mcap = next(Path(bag).glob("*.mcap"))
     data = mcap.read_bytes()
@@ -105,12 +100,12 @@ def test_a_flipped_parameter_record_in_the_mcap_is_refused(slow_bag, tmp_path):
     flipped.write_bytes(bytes(bad))
     with pytest.raises(BagReadError, match="fails its checksum"):
         analyze_bag(flipped)
-    out = _cli(str(flipped))
+    out = hexapod("analyze", "--no-plots", str(flipped))
     assert out.returncode == 2 and "fails its checksum" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
 
 
-def test_a_metadata_yaml_that_disagrees_with_the_mcap_is_refused(slow_bag, tmp_path):
+def test_a_metadata_yaml_that_disagrees_with_the_mcap_is_refused(slow_bag, tmp_path, hexapod):
     bag, _ = slow_bag
     import shutil
 
@@ -122,7 +117,7 @@ def test_a_metadata_yaml_that_disagrees_with_the_mcap_is_refused(slow_bag, tmp_p
     meta.write_text(text.replace('\\"gait.velocity\\": 0.8', '\\"gait.velocity\\": 3.0'))
     with pytest.raises(BagReadError, match=f"{PARAMS_KEY} disagrees"):
         analyze_bag(copy)
-    out = _cli(str(copy))
+    out = hexapod("analyze", "--no-plots", str(copy))
     assert out.returncode == 2 and "disagrees" in out.stderr
 
 
@@ -189,18 +184,14 @@ def test_the_engine_changes_only_what_a_run_can_change():
         run(p, "pd_pf", 1.0, param_changes=[(0.5, {"ground.scale": -1.0})])
 
 
-def test_simulate_change_writes_the_change_into_its_bag(tmp_path):
+def test_simulate_change_writes_the_change_into_its_bag(tmp_path, hexapod):
     bag = tmp_path / "bag"
-    out = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "simulate",
-                          "--controller", "pd_pf", "--change", "1.5:ground.scale=2.0",
-                          "--set", "sim.dt=0.0001", "--set", "sim.control_period=0.001",
-                          "--bag", str(bag), "--json"], capture_output=True, text=True,
-                         timeout=300)
+    out = hexapod("simulate", "--controller", "pd_pf", "--change", "1.5:ground.scale=2.0",
+                  "--set", "sim.dt=0.0001", "--set", "sim.control_period=0.001",
+                  "--bag", str(bag), "--json")
     assert out.returncode == 0, out.stderr
     a = analyze_bag(bag)
     assert a.param_changes == [(1.5, "hexapod simulate", "ground.scale", 2.0)]
-    bad = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "simulate",
-                          "--change", "ground.scale"], capture_output=True, text=True,
-                         timeout=300)
+    bad = hexapod("simulate", "--change", "ground.scale")
     assert bad.returncode == 2 and "TIME:NAME=VALUE" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1

@@ -1,29 +1,25 @@
 """`hexapod simulate`: indices on stdout, JSON, one-line errors with a non-zero exit."""
 import json
-import subprocess
-import sys
 
 import pytest
 
 
-def hexapod(*args, check=False):
-    return subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", *args],
-                          capture_output=True, text=True, check=check, timeout=600)
-
-
-def test_simulate_prints_the_seven_indices():
-    out = hexapod("simulate", "--controller", "pd_pf", check=True).stdout
+def test_simulate_prints_the_seven_indices(hexapod):
+    r = hexapod("simulate", "--controller", "pd_pf")
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
     for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF"):
         assert name in out
     assert "T_max = 400 N m" in out
 
 
-def test_simulate_json_matches_the_python_api():
+def test_simulate_json_matches_the_python_api(hexapod):
     from hexapod_bringup.core.simulate import simulate
     from hexapod_common.core.params import load_params
 
-    doc = json.loads(hexapod("simulate", "--controller", "both", "--t-max", "150",
-                             "--json", check=True).stdout)
+    r = hexapod("simulate", "--controller", "both", "--t-max", "150", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
     p = load_params(**{"actuator.t_max": 150.0})
     for c in ("pd_p", "pd_pf"):
         assert doc[c]["status"] == "ok"
@@ -36,8 +32,19 @@ def test_simulate_json_matches_the_python_api():
     (["--set", "gait.duty_factor=1.5"], "parameter 'gait.duty_factor' = 1.5"),
     (["--params", "/nonexistent.yaml"], "cannot read params file"),
 ])
-def test_bad_input_is_one_line_and_nonzero(args, message):
+def test_bad_input_is_one_line_and_nonzero(hexapod, args, message):
     r = hexapod("simulate", *args)
     assert r.returncode == 2
     assert message in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("at, where", [("2.5", "inside the window: the indices mix both"),
+                                       ("1.5", "before the window: the indices are the new")])
+def test_simulate_says_where_a_live_change_falls_against_the_indices_window(hexapod, at,
+                                                                            where):
+    r = hexapod("simulate", "--controller", "pd_p", "--duration", "3", "--set",
+                "sim.control_period=0.001", "--change", f"{at}:ground.scale=2.0")
+    assert r.returncode == 0, r.stderr
+    assert "window = [2, 3] s" in r.stdout
+    assert f"parameter change: ground.scale = 2.0 at {at} s ({where}" in r.stdout

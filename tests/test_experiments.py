@@ -20,23 +20,32 @@ def _rows(res):
             for r in res.rows()]
 
 
-def test_sweep_equals_one_by_one_and_processes_equal_inline():
+@pytest.fixture(scope="module")
+def pool():
+    """One 2-worker process pool for the module's tests (a worker start loads the compiled
+    engine: seconds each); every test still runs its own cases on it."""
+    backend = ProcessBackend(2)
+    yield backend
+    backend.close()
+
+
+def test_sweep_equals_one_by_one_and_processes_equal_inline(pool):
     p = load_params()
     inline = ground_sweep(p, PERCENTS, 170.0, backend=InlineBackend())
-    procs = ground_sweep(p, PERCENTS, 170.0, backend=ProcessBackend(2))
+    procs = ground_sweep(p, PERCENTS, 170.0, backend=pool)
     assert _rows(inline) == _rows(procs)
     one = simulate(p.with_values(**{"actuator.t_max": 170.0, "ground.scale": 5.0}), "pd_p")
     assert inline.index("pd_p", "eps_xH")[2] == pytest.approx(one.indices.eps_xH, rel=1e-12)
 
 
-def test_sweep_on_a_local_dask_cluster_equals_local_processes():
+def test_sweep_on_a_local_dask_cluster_equals_local_processes(pool):
     distributed = pytest.importorskip("distributed", reason="dask.distributed not installed")
     p = load_params()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster:
         backend = make_backend("dask", cluster.scheduler_address)
         dask = ground_sweep(p, PERCENTS, 400.0, backend=backend)
-    local = ground_sweep(p, PERCENTS, 400.0, backend=ProcessBackend(2))
+    local = ground_sweep(p, PERCENTS, 400.0, backend=pool)
     assert _rows(dask) == _rows(local)
 
 
@@ -46,7 +55,7 @@ def _torque_peak(case):
     return float(np.abs(sim.run.obs[:, O_TQ]).max()), sim.indices.eps_xH
 
 
-def test_local_dask_cluster_spreads_batches_and_single_runs_like_the_process_pool():
+def test_local_dask_cluster_spreads_batches_and_single_runs_like_the_process_pool(pool):
     """`--dask local:2`: the backend starts its own 2-worker cluster, runs the batches
     (convergence checks included) and the single runs a report needs (calls), with the
     same numbers as the process pool, and stops the cluster at close()."""
@@ -54,12 +63,8 @@ def test_local_dask_cluster_spreads_batches_and_single_runs_like_the_process_poo
     p = load_params()
     cases = [Case(p.with_values(**{"ground.scale": s}), c)
              for s in (0.5, 2.0) for c in ("pd_p", "pd_pf")]
-    procs = ProcessBackend(2)
-    try:
-        local = ground_sweep(p, PERCENTS[:2], 400.0, backend=procs, check=True)
-        local_calls = dict(procs.calls(_torque_peak, cases))
-    finally:
-        procs.close()
+    local = ground_sweep(p, PERCENTS[:2], 400.0, backend=pool, check=True)
+    local_calls = dict(pool.calls(_torque_peak, cases))
     with make_backend("dask", "local:2") as dask:
         assert dask.workers == 2
         on_dask = ground_sweep(p, PERCENTS[:2], 400.0, backend=dask, check=True)

@@ -35,10 +35,35 @@ def hexapod(*args: str) -> subprocess.CompletedProcess:
                                        err.getvalue())
 
 
-def run_graph(*args: str) -> subprocess.CompletedProcess:
+def run_graph_script(*args: str) -> subprocess.CompletedProcess:
+    """scripts/run_graph.sh itself (set-up check, then the launcher in a process of its own)."""
     env = {**os.environ, "ROS_DOMAIN_ID": "231"}  # never used: nothing may start
     return subprocess.run([str(ROOT / "scripts" / "run_graph.sh"), *args], capture_output=True,
                           text=True, timeout=300, env=env)
+
+
+def run_graph(*args: str) -> subprocess.CompletedProcess:
+    """The launcher run_graph.sh hands its arguments to (``graph_launcher.run``), in this
+    process: the same parser and checks, without a bash, a set-up check and an interpreter
+    start per case (test_the_script_passes_bad_settings_to_the_launcher runs the script)."""
+    from hexapod_bringup.graph_launcher import run
+
+    out, err = io.StringIO(), io.StringIO()
+    domain = os.environ.get("ROS_DOMAIN_ID")
+    os.environ["ROS_DOMAIN_ID"] = "231"  # never used: nothing may start
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = run(list(args))
+            except SystemExit as exc:  # argparse
+                code = exc.code if isinstance(exc.code, int) else 2
+    finally:
+        if domain is None:
+            del os.environ["ROS_DOMAIN_ID"]
+        else:
+            os.environ["ROS_DOMAIN_ID"] = domain
+    return subprocess.CompletedProcess(["run_graph", *args], code, out.getvalue(),
+                                       err.getvalue())
 
 
 def one_error_line(r: subprocess.CompletedProcess, prog: str) -> str:
@@ -187,6 +212,21 @@ GRAPH_ONLY = [
 def test_bad_graph_option_is_one_line(tmp_path, options, message):
     assert message in one_error_line(run_graph(*options, "--bag", str(tmp_path / "b")),
                                      "run_graph")
+
+
+def test_the_script_passes_bad_settings_to_the_launcher(tmp_path):
+    """scripts/run_graph.sh says what its launcher says, and starts nothing: one case of
+    each kind above (a params file, an option of both front ends, a graph-only option)."""
+    f = tmp_path / "p.yaml"
+    f.write_text(PARAMS_FILES[1][0])
+    for args, message in ((["--params", str(f)], PARAMS_FILES[1][1]), OPTIONS[0],
+                          GRAPH_ONLY[3]):
+        bag = tmp_path / "b"
+        script = run_graph_script(*args, "--bag", str(bag))
+        line = one_error_line(script, "run_graph")
+        assert message in line
+        assert line == one_error_line(run_graph(*args, "--bag", str(bag)), "run_graph")
+        assert not bag.exists() and not (tmp_path / "b_logs").exists()
 
 
 CLI_ONLY = [

@@ -43,15 +43,13 @@ def next_domain_id() -> int:
     return (os.getpid() * 13 + next(_counter) * 7) % 101 + 1
 
 
-@pytest.fixture
-def make_graph(tmp_path: Path) -> Iterator[Callable[..., GraphProcesses]]:
-    """``make_graph(name)`` -> a GraphProcesses on a fresh domain id; all stopped at teardown."""
+def _graphs(tmp: Path) -> Iterator[Callable[..., GraphProcesses]]:
     graphs: list[GraphProcesses] = []
 
     def make(name: str = "g", **kw: Any) -> GraphProcesses:
         kw["overrides"] = FAST_TIMING + tuple(kw.get("overrides", ()))
         domain = next_domain_id()
-        g = GraphProcesses(tmp_path / f"{name}_logs",
+        g = GraphProcesses(tmp / f"{name}_logs",
                            env={"ROS_DOMAIN_ID": str(domain),
                                 "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, **kw)
         g.domain_id = domain  # type: ignore[attr-defined]
@@ -61,6 +59,20 @@ def make_graph(tmp_path: Path) -> Iterator[Callable[..., GraphProcesses]]:
     yield make
     for g in graphs:
         g.stop_all(order=STOP_ORDER)
+
+
+@pytest.fixture
+def make_graph(tmp_path: Path) -> Iterator[Callable[..., GraphProcesses]]:
+    """``make_graph(name)`` -> a GraphProcesses on a fresh domain id; all stopped at teardown."""
+    yield from _graphs(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def make_module_graph(tmp_path_factory: pytest.TempPathFactory
+                      ) -> Iterator[Callable[..., GraphProcesses]]:
+    """As :func:`make_graph`, for a module-scoped fixture: one run whose outputs several
+    tests read (each asserting one property) instead of one run per test."""
+    yield from _graphs(tmp_path_factory.mktemp("graph"))
 
 
 def sim_summary(log: str) -> dict[str, float]:

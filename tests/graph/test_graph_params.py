@@ -49,13 +49,15 @@ def _clock_watch(node):
     return wait
 
 
-def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engine(
-        make_graph, tmp_path):
+@pytest.fixture(scope="module")
+def live_change(make_module_graph, tmp_path_factory):
+    """One recorded 4 s lockstep run with ground.scale set to 2 at about 1 s and hostile
+    parameter records: (bag, the sim's log)."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 
-    bag = tmp_path / "bag"
-    g = make_graph()
+    bag = tmp_path_factory.mktemp("live_change") / "bag"
+    g = make_module_graph()
     with ros_client(g.domain_id) as node:
         wait_sim_time = _clock_watch(node)
         start_recorded_run(g, bag, DURATION, also_wait_for=(CLIENT_NODE,))
@@ -89,7 +91,12 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
             "hexapod_parameters/hexapod_sim", "ok", "change", forged.to_map())]))
         g.wait_log("metrics", "dropped a message on /hexapod/parameters: unauthenticated", 60)
     assert finish_recorded_run(g, 300)["missed"] == 0
+    return bag, g.log("hexapod_sim")
 
+
+def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engine(
+        live_change):
+    bag, _ = live_change
     # The bag holds every node's start values and the change, checksummed, yaml mirrored.
     with open_bag(bag) as b:
         records = read_records(b)
@@ -130,3 +137,25 @@ def test_a_live_ground_change_is_recorded_applied_by_analyze_and_equals_the_engi
     # ... and differs from a run without it (the change acted).
     base = run(fast_params(), "pd_pf", DURATION)
     assert not np.allclose(base.obs[k + 10:], r.obs[k + 10:])
+
+
+def test_the_change_is_logged_with_its_tick_and_the_printed_segment_says_so(live_change):
+    from hexapod_bringup.graph_launcher import indices_lines
+
+    bag, sim_log = live_change
+    report = json.loads((bag / "indices.json").read_text())
+    [change] = report["parameter_changes"]
+    k = change["tick"]
+    assert change == {"tick": k, "t": pytest.approx(k * 1e-3), "node": "hexapod_sim",
+                      "name": "ground.scale", "value": 2.0}
+    # the sim's log line says the tick the change took effect at (as the bag's record)
+    assert f"parameter change at tick {k} (t = {k * 1e-3:.6g} s): ground.scale = 2.0" in sim_log
+    assert "parameter ground.scale = 2.0\n" not in sim_log  # no line without its tick
+    # run_graph's table: the one segment's last full cycle [3, 4] s is after the change
+    # (or spans it): the row says which
+    lines = indices_lines(bag / "indices.json")
+    notes = [line for line in lines if line.strip().startswith("^")]
+    what = f"ground.scale = 2.0 at {k * 1e-3:.3f} s"
+    expected = ("this cycle spans a live parameter change" if k > 3000
+                else "after a live parameter change in this segment")
+    assert notes == [f"    ^ {expected}: {what}"], lines

@@ -136,7 +136,9 @@ def animate(segments: list[Segment], l1: float, out: Path, fps: float = 30.0,
 
 def _cmd_animate(args: argparse.Namespace) -> int:
     segments, l1, truncated = load_frames(args.bag, args.fps)
-    out = Path(args.out or (Path(args.bag).name.removesuffix(".mcap") + ".gif"))
+    from .cmd_analyze import beside
+
+    out = Path(args.out) if args.out else beside(args.bag, ".gif")
     if out.suffix.lower() == ".mp4":
         from matplotlib.animation import FFMpegWriter
 
@@ -152,7 +154,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     """Register `animate`."""
     ap = sub.add_parser("animate", help="GIF/MP4 of the stick-figure hexapod from a bag")
     ap.add_argument("bag", metavar="BAG")
-    ap.add_argument("--out", help="output file (.gif or .mp4; default <bag name>.gif)")
+    ap.add_argument("--out", help="output file (.gif or .mp4; default: beside the bag, BAG.gif)")
     ap.add_argument("--fps", type=float, default=30.0, help="frames per simulated second")
     ap.set_defaults(func=_cmd_animate)
 

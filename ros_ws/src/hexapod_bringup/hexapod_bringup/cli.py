@@ -80,6 +80,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if switches:
         print("switches: " + ", ".join(f"{c} at {t:g} s" for t, c in switches) +
               " (columns name the starting controller)")
+    if changes:
+        t_a, t_b = results[controllers[0]].outcome.window
+        for t, values in changes:
+            where = ("inside the window: the indices mix both settings" if t_a < t < t_b
+                     else "before the window: the indices are the new setting's"
+                     if t <= t_a else "after the window: the indices do not see it")
+            print("parameter change: " + ", ".join(f"{n} = {v!r}" for n, v in values.items())
+                  + f" at {t:g} s ({where})")
     header = f"{'index':<8} {'unit':<12}" + "".join(f"{c:>14}" for c in controllers)
     print(header)
     for name in REPORTED_NAMES:

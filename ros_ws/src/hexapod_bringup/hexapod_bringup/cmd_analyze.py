@@ -125,22 +125,52 @@ def insert_nan(a, where):  # type: ignore[no-untyped-def]
     return np.insert(a, where, np.nan)
 
 
+def beside(bag: str | Path, suffix: str) -> Path:
+    """``BAG<suffix>`` in the bag's own directory (a bag directory or an .mcap file; '.' and
+    '..' are resolved first so the name is the bag's)."""
+    path = Path(bag)
+    if path.name in ("", ".", ".."):
+        path = path.resolve()
+    return path.with_name(path.name.removesuffix(".mcap") + suffix)
+
+
+def default_out(bags: list[str]) -> Path:
+    """Where `analyze` writes without --out: ``BAG_analysis`` beside the bag; for several bags
+    beside the first, named after all of them (or the first and a count)."""
+    if len(bags) == 1:
+        return beside(bags[0], "_analysis")
+    names = [beside(b, "").name for b in bags]
+    joined = "+".join(names)
+    tag = joined if len(joined) <= 80 else f"{names[0]}+{len(names) - 1}_more"
+    return beside(bags[0], "").with_name(tag + "_analysis")
+
+
+def _write_csv(rows: list[dict[str, object]], path: Path) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
 def _cmd_analyze(args: argparse.Namespace) -> int:
     analyses = [analyze_bag(b) for b in args.bags]
     _print(analyses, args.cycles)
     rows = [r for a in analyses for r in _rows(a)]
+    out = Path(args.out) if args.out else default_out(args.bags)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_csv(rows, out / "indices.csv")
+    (out / "indices.json").write_text(json.dumps(rows, indent=1, default=float))
+    print(f"\ntables: {out / 'indices.csv'}, {out / 'indices.json'}")
     if args.csv:
-        with open(args.csv, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-        print(f"\nCSV: {args.csv}")
+        _write_csv(rows, Path(args.csv))
+        print(f"CSV: {args.csv}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
         print(f"JSON: {args.json}")
     if not args.no_plots:
-        paths = _plots(analyses, Path(args.plots))
+        paths = _plots(analyses, out)
         print("plots: " + ", ".join(str(p) for p in paths))
+    print(f"analysis written to {out}")
     return 0
 
 
@@ -163,11 +193,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     ap = sub.add_parser("analyze", help="indices of recorded bags, per segment and gait cycle")
     ap.add_argument("bags", nargs="+", metavar="BAG", help="bag directory or .mcap file")
     ap.add_argument("--cycles", action="store_true", help="also print every gait cycle")
-    ap.add_argument("--csv", help="write segments and cycles to this CSV file")
-    ap.add_argument("--json", help="write segments and cycles to this JSON file")
-    ap.add_argument("--plots", default="analysis", help="directory for the PNG time plots")
+    ap.add_argument("--out", "--plots", dest="out", metavar="DIR",
+                    help="directory for the tables (indices.csv, indices.json) and the PNG "
+                    "time plots (default: beside the bag, BAG_analysis; printed)")
+    ap.add_argument("--csv", help="also write segments and cycles to this CSV file")
+    ap.add_argument("--json", help="also write segments and cycles to this JSON file")
     ap.add_argument("--no-plots", action="store_true", help="skip the plots")
     ap.set_defaults(func=_cmd_analyze)
 
 
-__all__ = ["add_parser"]
+__all__ = ["add_parser", "beside", "default_out"]

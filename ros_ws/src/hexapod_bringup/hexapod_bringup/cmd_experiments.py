@@ -5,9 +5,10 @@ import argparse
 import csv
 import json
 import math
+import os
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, TextIO
 
 import numpy as np
 
@@ -18,15 +19,33 @@ from .cmd_controllers import controller_list, preload
 from hexapod_metrics.core.indices import INDEX_NAMES
 
 
-def progress_factory(enabled: bool) -> Callable[[str, int], Callable[[int], None]]:
-    """A tqdm bar per labelled piece of work, on stderr (silent when disabled)."""
+#: tqdm's layout with the remaining time spelled out.
+BAR_FORMAT = ("{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+              "[{elapsed} elapsed, ETA {remaining}, {rate_fmt}]")
+
+
+def progress_factory(enabled: bool, stream: TextIO | None = None
+                     ) -> Callable[[str, int], Callable[[int], None]]:
+    """A tqdm bar with an ETA per labelled piece of work, on ``stream`` (stderr); silent when
+    disabled or when the stream is not a terminal (a log file or a pipe gets no bars)."""
+    out = sys.stderr if stream is None else stream
+    try:
+        enabled = enabled and out.isatty()
+    except (AttributeError, ValueError):  # closed or not a real stream
+        enabled = False
+
     def make(label: str, total: int) -> Callable[[int], None]:
         if not enabled:
             return lambda n: None
         from tqdm import tqdm
 
-        bar = tqdm(total=total, desc=label, unit="run", file=sys.stderr, leave=True,
-                   dynamic_ncols=True)
+        try:  # a terminal that reports no size (a bare pty) would get an empty bar
+            sized = os.get_terminal_size(out.fileno()).columns > 0
+        except (AttributeError, OSError, ValueError):
+            sized = False
+        bar = tqdm(total=total, desc=label, unit="run", file=out, leave=True,
+                   dynamic_ncols=sized, ncols=None if sized else 100,
+                   bar_format=BAR_FORMAT)
 
         def update(n: int) -> None:
             bar.update(n)
@@ -42,7 +61,8 @@ def _backend_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dask", metavar="ADDRESS",
                         help="scheduler address of an existing Dask cluster (tcp://host:port), "
                              "or local:N to start a cluster of N workers on this machine")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bars (there are none when stderr is not a terminal)")
 
 
 def _backend(args: argparse.Namespace):  # type: ignore[no-untyped-def]
@@ -81,6 +101,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     prog = progress_factory(not args.no_progress)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    print(f"writing results and plots into {out.resolve()}", flush=True)
     runs = 3 if args.check else 1
     results = []
     if args.kind == "ground":
@@ -195,6 +216,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     p = params_from_args(args)
     plan = Plan.quick() if args.quick else Plan()
+    print(f"writing the report into {Path(args.out).resolve()}", flush=True)
     verdicts = reproduce(p, Path(args.out), _backend(args), plan,
                          progress_factory(not args.no_progress))
     for v in verdicts:
@@ -223,7 +245,8 @@ COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt,
              help="ground sweep: T_max values, one sweep each (default 400,170)"),
         _opt("--controllers", default="pd_p,pd_pf",
              help="comma-separated registered controllers or module:Class paths"),
-        _opt("--out", default="sweeps", help="output directory (CSV, JSON, PNG)"),
+        _opt("--out", default="sweeps", help="output directory (CSV, JSON, PNG; default "
+             "./sweeps, printed at the start)"),
         _opt("--check", action="store_true",
              help="rerun every point at dt/2 and dt/4 and report its convergence"))),
     ("converge", "rerun a case at dt/2 and dt/4: is it converged?", _cmd_converge, (
@@ -251,7 +274,8 @@ COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt,
              help="explicit values for one gain, e.g. kp1=5000:160000:16"),
         _opt("--json", help="write every evaluated set to this JSON file"))),
     ("reproduce", "run E1-E6, check every point in dt, write the report", _cmd_reproduce, (
-        _opt("--out", default="report", help="report directory (default report/)"),
+        _opt("--out", default="report", help="report directory (default ./report: from the "
+             "repository's root this regenerates the committed report; printed at the start)"),
         _opt("--quick", action="store_true",
              help="a few points per experiment (every point still checked in dt)"))),
 )

@@ -449,19 +449,22 @@ def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
         while (not got or time.monotonic() < start + min(DISCOVERY_TIME, timeout)) \
                 and time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.1)
-        nodes = sorted(n for n in node.get_node_names() if not n.startswith("hexapod_status_"))
+        # This process discovers the graph node by node: the status came once the sim was
+        # seen, the others may not be yet. The sim's status names what it sees.
+        ours = set(node.get_node_names())
         from hexapod_common.runtime.controller_graph import controller_nodes
 
         controllers = controller_nodes(node)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    if not got:
-        return nodes, None
-    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"]
+    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"] if got else []
+    values = dict(sim[0].values) if sim else {}
+    theirs = {n for n in values.get("nodes", "").split(",") if n}
+    nodes = sorted(n for n in ours | theirs
+                   if not n.startswith(("hexapod_status_", "_")))
     if not sim:
         return nodes, None
-    values = dict(sim[0].values)
     # the sim's view (it has long discovered every node) and this tool's
     seen = set(controllers) | set(filter(None, values.get("controller_nodes", "").split(",")))
     nodes = sorted(set(nodes) | seen)
@@ -493,10 +496,13 @@ def _cmd_status(args: argparse.Namespace) -> int:
     print("controllers: " + (", ".join(
         f"{name_of(n)} (node {n}{', in charge' if name_of(n) == st['controller'] else ''})"
         for n in st.get("controller_nodes", "").split(",") if n) or "none on the graph"))
-    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}), "
+    end = st.get("end_tick", "none")
+    until = f" of {end}" if end not in ("none", "") else "; runs until stopped"
+    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}"
+          f"{until}), "
           f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"
           f" fallback {st['fallback']}, real-time factor {st['real_time_factor']}: "
-          f"{st['message']}")
+          + (st["message"] if st["level"] == "ok" else f"{st['level'].upper()}: {st['message']}"))
     return 0
 
 

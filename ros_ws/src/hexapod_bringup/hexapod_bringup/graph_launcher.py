@@ -3,8 +3,10 @@
 Runs the simulator, the trajectory generator, both controllers and the recorder (and
 optionally the markers node) as processes of one :class:`~.cmd_graph.GraphProcesses`,
 waits for the sim to finish (``--duration``) or for Ctrl-C / SIGTERM, stops every node,
-prints the indices of each controller segment and the bag's path, and exits with a code
-that says what went wrong (:data:`EXIT_CODES`).
+prints the sim's tick counts, the messages the sim and the recorder dropped and the
+publishers outside the graph they saw (:func:`inputs_lines`), the indices of each
+controller segment (noting live parameter changes, :func:`indices_lines`) and the bag's
+path, and exits with a code that says what went wrong (:data:`EXIT_CODES`).
 
 Before any node starts, the settings are checked the way ``hexapod simulate`` checks them
 (the same parser, the same messages, :mod:`.cli_args`): a bad option, an unknown or
@@ -444,6 +446,7 @@ class Launcher:
                                  f"charge went silent)")
             if summary["missed"] or summary["fallback_episodes"]:
                 lines += self.controller_waits()
+        lines += inputs_lines(summary, self.bag / "indices.json")
         lines += indices_lines(self.bag / "indices.json")
         return lines
 
@@ -478,6 +481,39 @@ def _how(code: int | None) -> str:
     return f"exited with code {code}"
 
 
+def inputs_lines(summary: dict[str, Any] | None, indices: Path) -> list[str]:
+    """Lines: the messages the sim and the recorder dropped (per topic and cause) and the
+    publishers outside the graph they saw, from the sim's summary and ``indices.json``."""
+    docs = [("sim", summary or {})]
+    try:
+        docs.append(("recorder", json.loads(indices.read_text())))
+    except (OSError, ValueError):
+        pass
+    dropped = []
+    outside: dict[str, set[str]] = {}
+    for who, doc in docs:
+        counts = doc.get("dropped") or {}
+        if counts:
+            dropped.append(f"{who} {sum(counts.values())} ("
+                           + ", ".join(f"{k} {n}" for k, n in sorted(counts.items())) + ")")
+        for topic, names in (doc.get("outside_publishers") or {}).items():
+            outside.setdefault(topic, set()).update(names)
+    lines = ["  inputs: " + ("dropped " + "; ".join(dropped) if dropped
+                             else "no message dropped")]
+    lines.append("  publishers outside the graph: " + ("; ".join(
+        f"{t}: {', '.join(sorted(n))}" for t, n in sorted(outside.items())) or "none"))
+    return lines
+
+
+def _changes_in(changes: list[dict[str, Any]], t0: float, t1: float) -> list[dict[str, Any]]:
+    """The parameter changes at times in (t0, t1]."""
+    return [c for c in changes if t0 < c["t"] <= t1 + 1e-12]
+
+
+def _change_text(changes: list[dict[str, Any]]) -> str:
+    return ", ".join(f"{c['name']} = {c['value']!r} at {c['t']:.3f} s" for c in changes)
+
+
 def indices_lines(path: Path) -> list[str]:
     """The table of indices per controller segment from ``indices.json``, each cycle under
     the metrics node's label (``hexapod_common.core.labels``: ``fallback``, ``held`` or
@@ -487,6 +523,7 @@ def indices_lines(path: Path) -> list[str]:
     except (OSError, ValueError):
         return [f"run_graph: no indices.json in {path.parent} (see the metrics log)"]
     names = doc["index_names"]
+    changes = doc.get("parameter_changes") or []
     out = ["indices per controller segment (last full gait cycle of each):",
            f"  {'controller':<24} {'segment [s]':<16} {'cycle [s]':<12}"
            + "".join(f"{n:>11}" for n in names)]
@@ -499,6 +536,16 @@ def indices_lines(path: Path) -> list[str]:
         label = c.get("label", s["controller"])
         row = "".join(f"{c['indices'][n]:>11.4g}" for n in names)
         out.append(f"  {label:<24} {seg:<16} {'[%g, %g]' % (c['t_a'], c['t_b']):<12}{row}")
+        # live parameter changes: inside the cycle the numbers mix two settings; before it
+        # (in this segment) they are the new setting's, not the segment start's
+        inside = _changes_in(changes, c["t_a"], c["t_b"] - 1e-9)
+        before = _changes_in(changes, s["t_start"] - 1e-9, c["t_a"])
+        if inside:
+            out.append(f"    ^ this cycle spans a live parameter change: "
+                       f"{_change_text(inside)}")
+        if before:
+            out.append(f"    ^ after a live parameter change in this segment: "
+                       f"{_change_text(before)}")
     return out
 
 

@@ -25,7 +25,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from hexapod_common.core import msg_checks as M
 from hexapod_common.core import topics as T
 from hexapod_common.core.labels import in_charge
-from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
+from hexapod_common.core.param_log import RECORD_NAME, ParamRecord, timeline
+from hexapod_common.core.params import SPECS
 from hexapod_common.runtime.controller_graph import NamesOnGraph
 from hexapod_common.core.topics import TICK_TOPICS, TOPICS
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
@@ -270,6 +271,7 @@ class MetricsNode(Node):
                   "parameter_records": len(self.params_log.records),
                   "dropped": {f"{t} ({c})": n for (t, c), n in self.guard.drops.counts.items()},
                   "outside_publishers": {t: sorted(n) for t, n in self.guard.outsiders.items()},
+                  "parameter_changes": self.parameter_changes(),
                   **self.scores(),
                   "recording": self.recording_report()}
         try:
@@ -287,6 +289,14 @@ class MetricsNode(Node):
             + f"; inputs: {self.guard.summary()}")
 
     closed = False
+
+    def parameter_changes(self) -> list[dict[str, Any]]:
+        """The live changes of model parameters recorded, each from its owner (the node that
+        applies it), at the tick it took effect (indices.json)."""
+        tl = timeline(self.params_log.records, SPECS)
+        return [{"tick": k, "t": k * self.period, "node": node, "name": name, "value": v}
+                for k, node, name, v in (tl.changes if tl is not None else ())
+                if name != "run.controller"]  # switches split the segments already
 
     def recording_report(self) -> dict[str, Any]:
         """How the recording ended: state, failure, late and lost messages."""

@@ -635,8 +635,11 @@ class SimNode(Node):
             level, msg = "ok", "finished"
         else:
             level, msg = "ok", "running"
-        if level == "ok" and (self.guard.drops.total or self.guard.key is None):
-            level, msg = "warn", f"{msg}; {self.guard.drops.summary()}"
+        g = self.guard
+        if level == "ok" and g.warn_now():  # what is true now: not a publisher that left
+            level = "warn"
+        if g.drops.total or g.outsiders or g.key is None:
+            msg = f"{msg}; {g.now()}"
         values = {
             "mode": self.mode, "sim_time": f"{k * self.period:.6f}", "tick": str(k),
             "controller": m.in_charge, "missed_ticks": str(m.missed),
@@ -645,12 +648,16 @@ class SimNode(Node):
             "fallback_episodes": str(m.fallback_episodes),
             "switches": str(m.switches), "missed_after_switch": str(m.missed_after_switch),
             "real_time_factor": f"{self.rtf:.3f}",
-            "resyncs": str(m.resyncs), "end_tick": str(m.end_tick),
+            "resyncs": str(m.resyncs),
+            "end_tick": str(m.end_tick) if self.stop_at_end else "none",
             "round_trip_median_ms": f"{m.latency_ms(0.5):.3f}",
             "round_trip_p99_ms": f"{m.latency_ms(0.99):.3f}",
             "stop_at_end": str(self.stop_at_end).lower(),
             "foreign_commands": str(m.foreign), **self.guard.values(),
             "controller_nodes": self._controller_nodes(),
+            # the sim's view of the graph (a `hexapod status` just started may not have
+            # discovered every node yet); asked by node name, tens of microseconds
+            "nodes": ",".join(sorted(n for n in self.get_node_names() if not n.startswith("_"))),
         }
         return C.Status("hexapod_sim", level, msg, values)
 
@@ -701,14 +708,19 @@ class SimNode(Node):
                 f"{self.guard.summary()}")
 
     def write_summary(self) -> None:
-        """Write the machine's ``summary_doc`` to ``summary_path`` (atomically), if set."""
+        """Write the machine's ``summary_doc`` and what the sim's inputs dropped and who
+        published from outside the graph to ``summary_path`` (atomically), if set."""
         if not self.summary_path:
             return
         import json
 
+        g = self.guard
+        doc = self.ticks.summary_doc() | {
+            "dropped": {f"{t} ({c})": n for (t, c), n in g.drops.counts.items()},
+            "outside_publishers": {t: sorted(n) for t, n in g.outsiders.items()}}
         tmp = f"{self.summary_path}.tmp"
         with open(tmp, "w") as f:
-            json.dump(self.ticks.summary_doc(), f)
+            json.dump(doc, f)
         os.replace(tmp, self.summary_path)
 
     def flush(self, timeout: float = 2.0) -> None:

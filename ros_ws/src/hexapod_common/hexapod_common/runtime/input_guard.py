@@ -8,11 +8,17 @@ is dropped, counted per topic and cause, logged (the first of each topic and cau
 10, 100, 1000, ... of them) and reported on ``/hexapod/status`` and in the node's end
 summary. When messages without a valid tag arrive on a topic, the guard looks up who
 publishes it (``get_publishers_info_by_topic``: rclpy cannot tell which publisher sent a
-given message) and names the publishers that are not nodes of this graph.
+given message) and names the publishers that are not nodes of this graph; while any is
+there it looks again every :data:`RELOOK` s, so that the status says when one has left. A
+node's status warns of what is true now (:meth:`InputGuard.warn_now`): an outside publisher
+present, a message dropped in the last :data:`RECENT_DROPS` s, or authentication off; the
+counts and every publisher ever seen stay in the values and the end summary.
 """
 from __future__ import annotations
 
+import math
 import struct
+import time
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -44,6 +50,11 @@ AUTH_HINT = ("no valid 32-byte trailer (sender | sequence | BLAKE2b-128 tag keye
              "run's key from HEXAPOD_KEY_FILE): sign with hexapod_common.auth, or as "
              "docs/controllers.md, 'Authentication', says")
 _U32 = struct.Struct("<I")
+#: Wall s after the last dropped message during which a status still warns of drops.
+RECENT_DROPS = 5.0
+#: Wall s between two looks at whether the outside publishers seen are still there (each
+#: look asks the graph for a suspect topic's publishers, ~0.3 ms; only while one is there).
+RELOOK = 2.0
 
 
 def _decode(codec: C.JointStateCodec, data: bytes, size: int | None = None
@@ -81,7 +92,11 @@ class InputGuard:
         trace.name_process(node.get_name())
         self.key = run_key()
         self.drops = M.DropCounter()
-        self.outsiders: dict[str, set[str]] = {}
+        self.outsiders: dict[str, set[str]] = {}  # every one seen (the end summary)
+        self.present: dict[str, set[str]] = {}  # those there at the last look (the status)
+        self._relook_at = 0.0  # monotonic s of the next look while some are present
+        self._drops_seen = 0  # drops.total at the last refresh
+        self._last_drop = -math.inf  # monotonic s of the refresh that saw new drops
         self._verifiers: dict[str, Verifier | Unsigned] = {}
         self._suspect: set[str] = set()
         #: nodes outside GRAPH_NODES whose signed messages were accepted (a controller that
@@ -223,8 +238,10 @@ class InputGuard:
                 self.look_up()
 
     def look_up(self) -> None:
-        """Name the publishers of the suspect topics that are not nodes of this graph."""
+        """Name the publishers of the suspect topics that are not nodes of this graph (new
+        ones logged as a warning, those that left as info)."""
         self._looked_at = self.drops.total
+        self._relook_at = time.monotonic() + RELOOK
         for topic in sorted(self._suspect):
             try:
                 infos = self.node.get_publishers_info_by_topic(topic)
@@ -234,6 +251,14 @@ class InputGuard:
                      if (i.node_name not in PUBLISHERS.get(topic, ())
                          and i.node_name not in self.vouched) or
                      i.node_namespace not in ("/", "")}
+            left = self.present.get(topic, set()) - names
+            if names:
+                self.present[topic] = names
+            else:
+                self.present.pop(topic, None)
+            if left:
+                self.log.info(f"publishers outside the graph on {topic} left: "
+                              f"{', '.join(sorted(left))}")
             new = names - self.outsiders.get(topic, set())
             if new:
                 self.outsiders.setdefault(topic, set()).update(new)
@@ -251,24 +276,58 @@ class InputGuard:
             self.outsiders = {t: n for t, n in self.outsiders.items() if n}
 
     def refresh(self) -> None:
-        """Look the suspect topics' publishers up again if more was dropped (call at a low
-        rate, e.g. from the status timer)."""
-        if self._suspect and self.drops.total != self._looked_at:
+        """Look the suspect topics' publishers up again if more was dropped, or every
+        :data:`RELOOK` s while an outside publisher is there (call at a low rate, e.g. from
+        the status timer)."""
+        now = time.monotonic()
+        if self.drops.total != self._drops_seen:
+            self._drops_seen = self.drops.total
+            self._last_drop = now
+        if self._suspect and (self.drops.total != self._looked_at
+                              or (self.present and now >= self._relook_at)):
             self.look_up()
+
+    def warn_now(self) -> bool:
+        """Does something call for a warning now: a publisher outside the graph present at
+        the last look, a message dropped in the last :data:`RECENT_DROPS` s (as of the last
+        :meth:`refresh`), or authentication off?"""
+        return (self.key is None or bool(self.present)
+                or time.monotonic() - self._last_drop < RECENT_DROPS)
+
+    def now(self) -> str:
+        """One phrase for a status: who is publishing from outside now, the drops (and if
+        none came lately), who came and left."""
+        parts = []
+        if self.present:
+            parts.append("publishers outside the graph: " + _names(self.present))
+        if self.drops.total:
+            recent = time.monotonic() - self._last_drop < RECENT_DROPS
+            parts.append(self.drops.summary()
+                         + ("" if recent else f" (none in the last {RECENT_DROPS:g} s)"))
+        left = self._left()
+        if left:
+            parts.append("gone from outside the graph: " + _names(left))
+        if self.key is None:
+            parts.append("authentication off")
+        return "; ".join(parts) or self.drops.summary()
+
+    def _left(self) -> dict[str, set[str]]:
+        """Outside publishers seen that were not there at the last look, per topic."""
+        out = {t: n - self.present.get(t, set()) for t, n in self.outsiders.items()}
+        return {t: n for t, n in out.items() if n}
 
     def values(self) -> dict[str, str]:
         """Diagnostic key/values: authentication, drops, publishers outside the graph."""
         out = {"authentication": "off" if self.key is None else "on", **self.drops.values()}
-        out["outside_publishers"] = "; ".join(
-            f"{t}: {', '.join(sorted(n))}" for t, n in sorted(self.outsiders.items())) or "none"
+        out["outside_publishers"] = _names(self.present) or "none"  # there now
+        out["outside_publishers_left"] = _names(self._left()) or "none"
         return out
 
     def summary(self) -> str:
         """One phrase for the end summary: drops and publishers outside the graph."""
         text = self.drops.summary()
         if self.outsiders:
-            text += "; publishers outside the graph: " + "; ".join(
-                f"{t}: {', '.join(sorted(n))}" for t, n in sorted(self.outsiders.items()))
+            text += "; publishers outside the graph: " + _names(self.outsiders)
         if self.key is None:
             text += "; authentication off"
         return text
@@ -292,9 +351,14 @@ class InputGuard:
     def status(self, name: str, stamp_ns: int, extra: dict[str, str] | None = None) -> bytes:
         """A /hexapod/status message of this node's inputs (for non-sim nodes)."""
         self.refresh()
-        level = "warn" if self.drops.total or self.key is None else "ok"
+        level = "warn" if self.warn_now() else "ok"
         return C.encode_statuses(max(0, stamp_ns), [C.Status(
-            name, level, self.drops.summary(), {**self.values(), **(extra or {})})])
+            name, level, self.now(), {**self.values(), **(extra or {})})])
+
+
+def _names(by_topic: dict[str, set[str]]) -> str:
+    """'topic: a, b; topic2: c' ('' if none)."""
+    return "; ".join(f"{t}: {', '.join(sorted(n))}" for t, n in sorted(by_topic.items()) if n)
 
 
 __all__ = ["GRAPH_NODES", "InputGuard", "PUBLISHERS", "SIGNED_TOPICS"]

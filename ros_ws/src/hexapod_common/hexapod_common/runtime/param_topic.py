@@ -50,6 +50,8 @@ class ParamAnnouncer:
         binding = getattr(node, "binding", None)
         if binding is not None:
             values = {**binding.params.to_flat(), **values}
+            binding.say_changes = False  # said by publish(), with the change's tick
+        self.log = getattr(node, "log", None) or node.get_logger()
         self.publish("start", 0, values)
 
     def _changed(self, params: list[Parameter]) -> None:
@@ -72,6 +74,9 @@ class ParamAnnouncer:
         status = C.Status(f"{RECORD_NAME}/{rec.node}", "ok", kind, rec.to_map())
         self.pub.publish(self.guard.signed(self.signer, C.encode_statuses(stamp, [status])))
         self.sent += 1
+        if kind == "change":
+            self.log.info(f"parameter change at tick {tick} (t = {tick * self.period:.6g} s): "
+                          + ", ".join(f"{n} = {v!r}" for n, v in values.items()))
         return rec
 
 

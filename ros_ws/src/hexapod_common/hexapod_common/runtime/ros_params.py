@@ -209,6 +209,9 @@ class ParamBinding:
         self._on_change = on_change
         self._check = check
         self._checks = checks or {}
+        #: Log each accepted change here; a node's ParamAnnouncer turns this off and says
+        #: it with the tick the change takes effect at instead (param_topic.py).
+        self.say_changes = True
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
@@ -264,7 +267,7 @@ class ParamBinding:
         done, self._validated = self._validated, None
         self.params = done[1] if done is not None and done[0] is changes else self._merged(changes)
         for p in changes:
-            if p.name in names:
+            if p.name in names and self.say_changes:
                 self.log.info(f"parameter {p.name} = {p.value!r}")
         if self._on_change is not None:
             self._on_change(self.params, names)

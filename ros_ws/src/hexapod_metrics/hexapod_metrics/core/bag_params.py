@@ -11,6 +11,7 @@ fall back to ``metadata.yaml``'s ``custom_data``, then to the shipped defaults, 
 """
 from __future__ import annotations
 
+import functools
 import json
 from typing import Any, NamedTuple
 
@@ -76,6 +77,15 @@ def _check_mirror(bag: Bag, custom: dict[str, Any], records: list[ParamRecord]) 
                                f"to guess which is right")
 
 
+@functools.lru_cache(maxsize=16)
+def _validated(flat_json: str) -> HexapodParams:
+    """from_flat of a JSON-encoded flat dict, remembered: its reachability check of the gait
+    costs ~50 ms, and analysing a batch of bags of one run's parameters (a sweep's, a
+    fuzz's) would pay it per bag. HexapodParams is frozen: sharing one is safe; a failure
+    is not remembered (raised again each time)."""
+    return from_flat(json.loads(flat_json))
+
+
 def bag_params(bag: Bag) -> BagParams:
     """The parameters of ``bag`` (see the module docstring)."""
     custom = (bag.metadata or {}).get("custom_data") or {}
@@ -88,7 +98,7 @@ def bag_params(bag: Bag) -> BagParams:
             raise BagReadError(f"{bag.path}: the start records lack {', '.join(missing[:3])}")
         _check_mirror(bag, custom, records)
         try:
-            p = from_flat(tl.start)
+            p = _validated(json.dumps(tl.start, sort_keys=True))
         except HexapodError as err:
             raise BagReadError(f"{bag.path}: recorded start parameters: {err}") from err
         return BagParams(p, FROM_MCAP, tl, tuple(records))

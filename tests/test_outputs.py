@@ -1,0 +1,84 @@
+"""Outputs land where users look: beside the input or in a printed directory, never among
+tracked files; progress bars (with an ETA) only on a terminal."""
+import io
+import fcntl
+import os
+import select
+import shutil
+import struct
+import subprocess
+import termios
+from pathlib import Path
+
+import pytest
+
+from hexapod_bringup.cmd_analyze import beside, default_out
+from hexapod_bringup.cmd_experiments import progress_factory
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _terminal():
+    """A pseudo-terminal 120 columns wide: (master fd, slave fd)."""
+    master, slave = os.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))
+    return master, slave
+
+
+def _drain(fd):
+    """Everything written to a pty so far (its reads come in pieces)."""
+    chunks = []
+    while select.select([fd], [], [], 0.2)[0]:
+        chunks.append(os.read(fd, 65536))
+    return b"".join(chunks).decode()
+
+
+def test_beside_names_the_output_after_the_bag_in_its_directory(tmp_path, monkeypatch):
+    assert beside("bags/run1", "_analysis") == Path("bags/run1_analysis")
+    assert beside("bags/run1/", ".gif") == Path("bags/run1.gif")
+    assert beside("/data/x.mcap", "_analysis") == Path("/data/x_analysis")
+    monkeypatch.chdir(tmp_path)
+    assert beside(".", "_analysis") == tmp_path.with_name(tmp_path.name + "_analysis")
+    assert default_out(["a/r1"]) == Path("a/r1_analysis")
+    assert default_out(["a/r1", "b/r2.mcap"]) == Path("a/r1+r2_analysis")
+    many = [f"a/{'long_bag_name_' * 2}{k}" for k in range(5)]
+    assert default_out(many) == Path(f"a/{'long_bag_name_' * 2}0+4_more_analysis")
+
+
+def test_no_generated_figure_is_tracked_outside_report():
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout: nothing tracked to check")
+    tracked = subprocess.run(["git", "ls-files", "*.png", "*.gif", "*.mp4", "*.svg"],
+                             cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    outside = [f for f in tracked.split() if not f.startswith("report/")]
+    assert outside == []
+
+
+def test_progress_bar_with_eta_on_a_terminal_and_silent_otherwise():
+    master, slave = _terminal()
+    with os.fdopen(slave, "w") as tty:
+        update = progress_factory(True, tty)("sweep", 4)
+        update(1)
+        update(3)
+        tty.flush()
+        shown = _drain(master)
+    os.close(master)
+    assert "sweep" in shown and "ETA" in shown and "4/4" in shown
+    master, slave = os.openpty()  # a terminal that reports no size: a bar all the same
+    with os.fdopen(slave, "w") as tty:
+        progress_factory(True, tty)("sweep", 2)(2)
+        tty.flush()
+        shown = _drain(master)
+    os.close(master)
+    assert "sweep: 100%" in shown and "ETA" in shown and "2/2" in shown
+    pipe = io.StringIO()
+    update = progress_factory(True, pipe)("sweep", 4)
+    update(4)
+    assert pipe.getvalue() == ""
+    master, slave = _terminal()
+    with os.fdopen(slave, "w") as tty:
+        progress_factory(False, tty)("sweep", 4)(4)
+        tty.write("x")
+        tty.flush()
+        assert _drain(master) == "x"
+    os.close(master)
