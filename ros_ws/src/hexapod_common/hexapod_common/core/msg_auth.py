@@ -205,7 +205,7 @@ class Verifier:
             self.last[sender] = newest = seq
         if len(seen) > 2 * REPLAY_WINDOW:
             self.seen[sender] = {x: v for x, v in seen.items() if x > newest - REPLAY_WINDOW}
-        return n - pad
+        return int(n - pad)
 
     def verify(self, data: bytes) -> bytes:
         """The payload of an authentic, new message (a copy); raises Rejected otherwise."""
