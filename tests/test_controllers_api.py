@@ -74,8 +74,15 @@ def user_module(tmp_path, monkeypatch):
                 return torque_command(self.p.gain * (obs.theta_d - obs.theta)
                                       + self.p.damping * (obs.theta_vel_d - obs.theta_vel))
         '''))
+    from hexapod_common.core.params import controller_names, unregister_controller_group
+
+    before = set(controller_names())
     monkeypatch.syspath_prepend(str(tmp_path))
-    return "my_ctl_mod:MyCtl"
+    yield "my_ctl_mod:MyCtl"
+    # groups are process-wide: a later load_params would carry them to worker processes
+    # that cannot import this test's module
+    for name in set(controller_names()) - before:
+        unregister_controller_group(name)
 
 
 def test_drive_command_broadcasts_and_names_a_bad_field():

@@ -173,7 +173,7 @@ def _bad_params_file(tmp_path: Path, name: str, value: object) -> Path:
      "parameter 'actuator.t_max' = 0.0 is invalid: allowed float in (0, inf]"),
     ("trajectory_generator", "gait.body_height", 2.5, "parameter 'gait.body_height' = 2.5"),
     ("metrics", "run.controller", "pd_x", "parameter 'run.controller' = 'pd_x' is invalid: "
-     "allowed one of pd_p, pd_pf"),
+     "allowed one of pd_alpha, pd_p, pd_pf (registered controllers)"),
 ])
 def test_bad_parameter_at_start_is_one_line_and_exit_2(make_graph, tmp_path, node, name, value,
                                                         message):

@@ -275,6 +275,15 @@ def register_controller_group(name: str, params_type: type, alias: str | None = 
     SPECS.refresh()
 
 
+def unregister_controller_group(name: str) -> None:
+    """Forget a group that :func:`register_controller_group` made known (a module:Class
+    controller this process loaded; entry points are found again on the next use)."""
+    _CONTROLLER_GROUPS.pop(name, None)
+    for alias in [a for a, n in _CONTROLLER_ALIASES.items() if n == name]:
+        del _CONTROLLER_ALIASES[alias]
+    SPECS.refresh()
+
+
 def load_controller_class(name: str) -> type:
     """The class of the controller ``name``: a registered name or a module:Class path (its
     parameter group is registered on the way). ParameterError lists the known names."""
@@ -392,6 +401,20 @@ class HexapodParams:
                 raise unknown_parameter(name, value)
             flat[name] = value
         return from_flat(flat)
+
+    def with_checked(self, groups: Mapping[str, Mapping[str, Any]]) -> "HexapodParams":
+        """A copy with values already checked one by one set, {group: {name: value}}, model
+        groups and controller groups alike, without the cross-parameter checks of
+        :func:`from_flat` (for live changes, which cannot affect them)."""
+        model = {g: replace(getattr(self, g), **kv) for g, kv in groups.items()
+                 if g not in _CONTROLLER_GROUPS}
+        ctl = dict(self.controllers)
+        for g, kv in groups.items():
+            if g in _CONTROLLER_GROUPS:
+                ctl[g] = replace(ctl[g] if g in ctl else self.gains(g), **kv)
+        order = [g for g, _ in self.controllers] + [g for g in ctl if g not in
+                                                      dict(self.controllers)]
+        return replace(self, **model, controllers=tuple((g, ctl[g]) for g in order))
 
     def to_flat(self) -> dict[str, Any]:
         """Dotted name -> value, the ROS parameter view."""
@@ -845,6 +868,7 @@ __all__ = [
     "ActuatorParams", "BodyParams", "COMMON_NODE_PARAMS", "CONTROLLERS", "CONTROLLER_GROUP",
     "GainParams", "controller_group", "controller_names", "load_controller_class",
     "register_controller_group", "registered_controllers", "unknown_controller",
+    "unregister_controller_group",
     "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
     "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
     "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",

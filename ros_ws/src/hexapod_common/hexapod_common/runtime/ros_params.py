@@ -30,7 +30,6 @@ on a command line.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any, Callable
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -169,7 +168,7 @@ def _with(p: HexapodParams, values: dict[str, Any]) -> HexapodParams:
     for name, value in values.items():
         group, _, key = name.partition(".")
         groups.setdefault(group, {})[key] = value
-    return replace(p, **{g: replace(getattr(p, g), **kv) for g, kv in groups.items()})
+    return p.with_checked(groups)
 
 
 def declare_node_param(node: Node, name: str) -> Any:
@@ -232,7 +231,7 @@ class ParamBinding:
                 groups.setdefault(group, {})[key] = self._checks.get(
                     p.name, check_value)(p.name, p.value)
             cur = self.params
-            return replace(cur, **{g: replace(getattr(cur, g), **kv) for g, kv in groups.items()})
+            return cur.with_checked(groups)
         flat = self.params.to_flat()
         own = {}
         for p in ours:
