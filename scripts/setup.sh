@@ -121,10 +121,14 @@ build_key="$({
   shopt -s nullglob
   for f in */package.xml */setup.py */setup.cfg; do echo "== $f"; cat "$f"; done
   ls -1 -- */resource */*/config 2>/dev/null || true
-  cd "$root/examples"  # example packages built with the workspace (examples/my_controller)
-  for f in */package.xml */setup.py */setup.cfg; do echo "== examples/$f"; cat "$f"; done
-  ls -1 -- */resource 2>/dev/null || true
+  if [[ -d "$root/examples" ]]; then  # packages built with the workspace (examples/my_controller)
+    cd "$root/examples"
+    for f in */package.xml */setup.py */setup.cfg; do echo "== examples/$f"; cat "$f"; done
+    ls -1 -- */resource 2>/dev/null || true
+  fi
 } | hash_of)"
+base_paths=(src)
+if [[ -d "$root/examples" ]]; then base_paths+=(../examples); fi
 build_stamp="$ws/install/.hexapod-setup.stamp"
 if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] \
    || [[ "$(cat "$build_stamp" 2>/dev/null)" != "$build_key" ]]; then
@@ -137,7 +141,7 @@ if (( force )) || [[ ! -d "$ws/build" || ! -f "$ws/install/local_setup.bash" ]] 
     unset AMENT_PREFIX_PATH COLCON_PREFIX_PATH CMAKE_PREFIX_PATH PYTHONPATH
     export PATH="$venv/bin:$PATH" VIRTUAL_ENV="$venv"
     logged "$ws/log/setup-colcon.log" colcon build --symlink-install \
-      --base-paths src ../examples \
+      --base-paths "${base_paths[@]}" \
       --event-handlers desktop_notification-
   ) || die "colcon build failed"
   echo "$build_key" >"$build_stamp"
