@@ -348,20 +348,25 @@ def ensure_active(node: Any, controller: str, timeout: float) -> str:
 
 def _is_lifecycle(node: Any, controller: str, timeout: float) -> bool:
     """Whether ``controller`` is served by a lifecycle node (an engine controller, or a node
-    with a ``get_state`` service); a plain node is switched to as it is."""
+    with a ``get_state`` service); a plain node is switched to as it is.
+
+    Waits up to ``timeout`` for this process to discover the node, then up to 2 s for its
+    services (they are announced one by one; ``get_state`` may come after the others)."""
     if controller in engine_names():
         return True
     target = node_of(controller)
-    end = time.monotonic() + min(timeout, 2.0)
-    while time.monotonic() < end:  # discovery of the node and its services
+    end = time.monotonic() + timeout
+    services_by: float | None = None
+    while time.monotonic() < end:
         if target in node.get_node_names():
+            services_by = services_by or time.monotonic() + 2.0
             try:
                 services = node.get_service_names_and_types_by_node(target, "/")
             except Exception:  # noqa: BLE001 - gone meanwhile
                 return False
             if any(name == f"/{target}/get_state" for name, _ in services):
                 return True
-            if any(name.endswith("/get_parameters") for name, _ in services):
+            if time.monotonic() > services_by:
                 return False
         time.sleep(0.05)
     return False
@@ -387,12 +392,16 @@ def switch(controller: str, timeout: float = 10.0) -> str:
         answer = request(f"switch {controller}", _domain(), timeout)
     except ChannelError as err:
         raise GraphError(str(err)) from err
+    # The sim already told a lifecycle node that is not active apart from a plain node:
+    # this process's own discovery of the node's services may take longer than the sim's.
+    known_lifecycle = False
     if answer is not None:
         status, _, text = answer.partition(" ")
         if status == "ok":
             return text
         if not text.endswith("not active"):
             raise GraphError(text)
+        known_lifecycle = True
     import rclpy
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import GetParameters, SetParameters
@@ -405,7 +414,8 @@ def switch(controller: str, timeout: float = 10.0) -> str:
                         GetParameters.Request(names=["run.controller"]), timeout,
                         missing).values[0].string_value
         before = (ensure_active(node, controller, timeout)
-                  if _is_lifecycle(node, controller, timeout) else "active")
+                  if known_lifecycle or _is_lifecycle(node, controller, timeout)
+                  else "active")
         value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=controller)
         req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
         end = time.monotonic() + timeout
