@@ -9,7 +9,7 @@ from hexapod_control.core.controllers import control_law, controller_code, gain_
 from hexapod_metrics.core.indices import INDEX_NAMES
 from hexapod_bringup.core.simulate import evaluate_batch, simulate
 from hexapod_sim.core.actuator import saturate
-from hexapod_sim.core.engine import Physics
+from hexapod_sim.core.physics import Physics
 from hexapod_common.core.params import load_params
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from hexapod_common.core import labels as L
 from hexapod_sim.core.actuator import saturate
-from hexapod_sim.core.engine import Physics
+from hexapod_sim.core.physics import Physics
 from hexapod_common.core.layout import O_THV, O_TQ, P_TMAX
 from hexapod_common.core.params import HexapodParams, load_params
 from hexapod_sim.core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait

@@ -7,7 +7,8 @@ from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.layout import STATE_SIZE
 from hexapod_common.core.params import N_LEGS, load_params
 from hexapod_control.core.closed_loop import run
-from hexapod_sim.core.engine import Physics, initial_state
+from hexapod_sim.core.engine import initial_state
+from hexapod_sim.core.physics import Physics
 from hexapod_sim.core.uneven_ground import GroundDraws, ground_factors, touchdowns
 
 

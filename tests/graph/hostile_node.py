@@ -193,6 +193,8 @@ class Hostile:
                       "negative stamp", "off-tick stamp"]
         if topic == T.ACTIVE_CONTROLLER:
             kinds += ["unknown controller", "not UTF-8"]
+        if topic == T.JOINT_COMMANDS:
+            kinds += ["negative drive gain", "drive gains, 23 entries"]
         kind = self.rng.choice(kinds)
         data = self._fuzz_message(topic, kind)
         if data is not None:
@@ -231,6 +233,16 @@ class Hostile:
                                                       list(msg.effort[:3]))
         elif kind == "short array":
             msg.effort = list(msg.effort[:-1])
+        elif kind in ("negative drive gain", "drive gains, 23 entries"):
+            msg.name = list(T.DRIVE_COMMAND_NAMES)  # a drive command (docs/controllers.md)
+            gains = [1.0] * len(T.JOINT_NAMES)
+            if kind == "negative drive gain":
+                gains[self.rng.randrange(len(gains))] = -1.0
+            msg.position, msg.velocity, msg.effort = (list(msg.position[:12]) + gains,
+                                                      list(msg.velocity[:12]) + gains,
+                                                      list(msg.effort[:12]) + gains)
+            if kind == "drive gains, 23 entries":
+                msg.name = msg.name[:-1]
         elif kind in ("NaN", "infinity"):
             bad = float("nan") if kind == "NaN" else float("inf")
             arr = self.rng.choice(("position", "velocity", "effort"))

@@ -194,7 +194,7 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
                       T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS, T.MARKERS}
     assert sum(n for k, n in sent.items() if k.endswith("(signed)")) > 50
     for kind in ("random", "empty", "truncated", "wrong names", "short array", "NaN",
-                 "stamp 1e6 s", "negative stamp", "unknown controller"):
+                 "stamp 1e6 s", "negative stamp", "unknown controller", "negative drive gain"):
         assert any(kind in k for k in sent), kind
 
     rec = _read(bag)
@@ -206,6 +206,7 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
                          (T.JOINT_STATES, M.BAD_STAMP), (T.JOINT_STATES, M.WRONG_SHAPE),
                          (T.JOINT_STATES, M.UNDECODABLE), (T.REFERENCE, M.NON_FINITE),
                          (T.JOINT_COMMANDS, M.WRONG_SHAPE),
+                         (T.JOINT_COMMANDS, M.NEGATIVE_GAIN),
                          (T.ACTIVE_CONTROLLER, M.BAD_CONTENT), (T.STATUS, M.UNDECODABLE),
                          (T.MARKERS, M.UNAUTHENTICATED)):
         assert dropped.get(f"{topic} ({cause})", 0) > 0, (topic, cause, dropped)

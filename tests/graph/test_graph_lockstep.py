@@ -100,3 +100,49 @@ def test_lockstep_run_equals_the_in_process_loop_and_every_tick_is_recorded(make
     for name in ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF"):
         assert getattr(offline, name) == pytest.approx(getattr(expected, name), rel=1e-12)
         assert getattr(online[2], name) == pytest.approx(getattr(offline, name), rel=1e-12)
+
+
+def test_pd_pf_with_its_force_loop_in_the_drive_equals_the_engine_over_the_wire(make_graph,
+                                                                                tmp_path):
+    # pd_pf.force_loop = drive: the controller node sends 24-entry drive commands (setpoints
+    # and gains), the sim's drive evaluates them at every physics step: the same numbers as
+    # the engine's run_drive_ticks, bit for bit up to the wire's float64.
+    bag = tmp_path / "bag"
+    duration = 1.0
+    g = make_graph(overrides=("pd_pf.force_loop:=drive",))
+    start_recorded_run(g, bag, duration)
+    summary = finish_recorded_run(g, 300)
+    assert summary["missed"] == 0 and summary["late"] == 0
+    assert "force loop in the drive" in g.log("pd_pf_controller")
+
+    p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD,
+                       "pd_pf.force_loop": "drive"})
+    ref = run(p, "pd_pf", duration)
+    topic_loop = run(load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD}), "pd_pf",
+                     duration)
+    n = ref.obs.shape[0]
+    with open_bag(bag) as b:
+        cols = {}
+        for topic in T.STATE_TOPICS:
+            a = read_joint_state_arrays(b, topic)
+            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
+            cols[topic] = (a.position, a.velocity, a.effort)
+        obs = T.obs_from_columns(cols)
+        np.testing.assert_allclose(obs, ref.obs, rtol=0, atol=1e-9)
+        assert np.abs(obs - topic_loop.obs).max() > 1e-6  # another controller than topic's
+        cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
+        assert cmd.names == T.DRIVE_COMMAND_NAMES
+        drive = T.drive_command(cmd.position[0], cmd.velocity[0], cmd.effort[0])
+        from hexapod_common.core.layout import C_KF, C_KP, C_TFF
+
+        kf = p.pd_pf.kf
+        assert np.all(drive[C_KF] == kf) and np.all(drive[C_TFF] == 0.0)
+        assert np.all(drive[C_KP][:, 0] == kf * p.pd_pf.kp1)
+
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([Path(bag)]) as reader:  # an independent reader opens the 24-entry form
+        conns = [c for c in reader.connections if c.topic == T.JOINT_COMMANDS]
+        _, _, raw = next(reader.messages(connections=conns))
+        msg = reader.deserialize(raw, conns[0].msgtype)
+    assert list(msg.name) == list(T.DRIVE_COMMAND_NAMES) and len(msg.effort) == 24

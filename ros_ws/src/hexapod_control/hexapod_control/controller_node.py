@@ -60,7 +60,9 @@ from sensor_msgs.msg import JointState
 from hexapod_common.runtime import conversions as C
 from hexapod_common.runtime import inputs_matched
 
-from .core.controllers import control_law, controller_code, gain_vector
+from hexapod_common.core.layout import COMMAND_SHAPE
+
+from .core.controllers import control_law, controller_code, gain_vector, pd_pf_drive_command
 from .core.waits import InputWaits
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
@@ -126,6 +128,8 @@ class ControllerNode(LifecycleNode):
         self.theta_d = np.zeros((N_LEGS, 2))
         self.theta_vel_d = np.zeros((N_LEGS, 2))
         self.demand = np.zeros((N_LEGS, 2))
+        self.cmd = np.zeros(COMMAND_SHAPE)
+        self.drive = False
         self.answered = 0
         self.waits = InputWaits()  # states whose reference or foot forces came after them
         self.warned_at = -WARN_EVERY  # monotonic s of the last warning about late inputs
@@ -147,7 +151,10 @@ class ControllerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ parameters
     def _load_gains(self, p: HexapodParams) -> None:
-        self.gains = gain_vector(p.gains(self.arch))
+        g = p.gains(self.arch)
+        self.gains = gain_vector(g)
+        # PD-P&F with its force loop in the drive: the command carries the drive's gains
+        self.drive = str(getattr(g, "force_loop", "topic")) == "drive"
         self.l1, self.l2 = p.robot.leg_length_1, p.robot.leg_length_2
 
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
@@ -167,7 +174,9 @@ class ControllerNode(LifecycleNode):
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
         self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
-                      f"{tuple(float(g) for g in self.gains)}")
+                      f"{tuple(float(g) for g in self.gains)}"
+                      + ("; force loop in the drive (24-entry drive commands)"
+                         if self.drive else ""))
         self._entered("inactive")
         return TransitionCallbackReturn.SUCCESS
 
@@ -383,10 +392,14 @@ class ControllerNode(LifecycleNode):
             tr = _trace.TRACER
             if tr is not None:
                 tr.mark(_trace.LAW0, stamp=stamp)
-            self._law()
+            if self.drive:
+                pd_pf_drive_command(self.gains, self.theta_d, self.theta_vel_d, self.cmd)
+                c = T.drive_command_columns(self.cmd)
+            else:
+                self._law()
+                c = T.command_columns(self.demand)
             if tr is not None:
                 tr.mark(_trace.LAW1, stamp=stamp)
-            c = T.command_columns(self.demand)
             data = self.cmd_codec.encode(stamp, self.arch, c.position, c.velocity, c.effort)
             data = self.cmd_signer.sign(data)
             if tr is not None:

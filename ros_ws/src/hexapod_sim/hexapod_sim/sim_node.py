@@ -32,7 +32,7 @@ from hexapod_common.runtime import conversions as C
 from hexapod_common.core import msg_checks as M
 from hexapod_common.core import topics as T
 from .core.actuator import saturate
-from .core.engine import Physics
+from .core.physics import Physics
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.controller_names import check_name, engine_names, node_of
 from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
@@ -471,7 +471,10 @@ class SimNode(Node):
         cmd = self.guard.joint_state(T.JOINT_COMMANDS, data, self.period_ns)
         if cmd is None:  # dropped (and counted) by the guard
             return
-        got = self.ticks.command(cmd.stamp_ns, cmd.frame_id, cmd.effort, time.monotonic())
+        demand = cmd.effort
+        if len(demand) != len(T.JOINT_NAMES):  # a drive command (docs/controllers.md)
+            demand = T.drive_command(cmd.position, cmd.velocity, cmd.effort)
+        got = self.ticks.command(cmd.stamp_ns, cmd.frame_id, demand, time.monotonic())
         if got is Outcome.AHEAD:
             self.guard.drop(T.JOINT_COMMANDS, M.BAD_STAMP,
                             f"stamp {cmd.stamp_ns * 1e-9:.9g} s is ahead of the current tick")

@@ -35,6 +35,7 @@ from .errors import CdrError
 __all__ = [
     'CODECS',
     'ENCAPSULATION',
+    'CommandCodec',
     'MAX_DDS_PADDING',
     'DiagnosticStatus',
     'JointStateArrays',
@@ -748,11 +749,55 @@ class JointStateCodec:
         return JointStateView(full.stamp_ns, full.frame_id, *arrays)
 
 
-CODECS: dict[str, JointStateCodec] = {
+class CommandCodec:
+    """The codec of /hexapod/joint_commands: a JointState of the 12 joints (torque-only) or
+    of the 24 entries of a drive command (the joints, then ``<joint>/gains``;
+    docs/controllers.md). The names count after the frame_id picks the form; each form
+    decodes as :class:`JointStateCodec` does."""
+
+    def __init__(self, names: Sequence[str], drive_names: Sequence[str]) -> None:
+        self.torque = JointStateCodec(names)
+        self.drive = JointStateCodec(drive_names)
+        self.names = self.torque.names
+        self.n = self.torque.n
+
+    def encode(
+        self,
+        stamp_ns: int,
+        frame_id: str,
+        position: Sequence[float] | FloatArray,
+        velocity: Sequence[float] | FloatArray,
+        effort: Sequence[float] | FloatArray,
+    ) -> bytes:
+        """12 values per array: a torque-only command; 24: a drive command."""
+        codec = self.drive if len(effort) == self.drive.n else self.torque
+        return codec.encode(stamp_ns, frame_id, position, velocity, effort)
+
+    def decode(self, data: bytes, size: int | None = None) -> JointStateView:
+        """As :meth:`JointStateCodec.decode`; the view's arrays hold 12 or 24 values."""
+        try:
+            (flen,) = _U32.unpack_from(data, 12)
+            (count,) = _U32.unpack_from(data, 16 + flen + (-flen) % 4)
+        except struct.error as err:
+            msg = f'not a serialized JointState: {err}'
+            raise CdrError(msg) from err
+        codec = self.drive if count == self.drive.n else self.torque
+        try:
+            return codec.decode(data, size)
+        except CdrError as err:
+            if 'does not carry' not in str(err):  # not a JointState at all
+                raise
+            text = (f'JointState does not carry the {self.n} joints {self.names[0]}..'
+                    f'{self.names[-1]} (torque only) or those and their {self.n} '
+                    f'"<joint>/gains" (a drive command) with all three arrays filled')
+            raise CdrError(text) from err
+
+
+CODECS: dict[str, JointStateCodec | CommandCodec] = {
     T.JOINT_STATES: JointStateCodec(T.JOINT_NAMES),
     T.FOOT_FORCES: JointStateCodec(T.FOOT_NAMES),
     T.HIP_STATES: JointStateCodec(T.HIP_NAMES),
     T.REFERENCE: JointStateCodec(T.REFERENCE_NAMES),
-    T.JOINT_COMMANDS: JointStateCodec(T.JOINT_NAMES),
+    T.JOINT_COMMANDS: CommandCodec(T.JOINT_NAMES, T.DRIVE_COMMAND_NAMES),
 }
 """One codec per JointState topic of the contract."""

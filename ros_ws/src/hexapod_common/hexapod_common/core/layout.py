@@ -32,6 +32,12 @@ OBS_FIELDS = ("theta", "theta_vel", "torque", "foot_pos", "foot_vel", "foot_forc
 (O_TH, O_THV, O_TQ, O_FP, O_FV, O_FF, O_HP, O_HV, O_HF) = range(9)
 OBS_SHAPE = (len(OBS_FIELDS), N_LEGS, 2)
 
+#: A drive command (model.md "Drive interface"), float64 (6, 6, 2): rows COMMAND_FIELDS per
+#: leg and joint (rad, rad/s, N m/rad, N m s/rad, N m, 1).
+COMMAND_FIELDS = ("q_ref", "dq_ref", "kp", "kd", "tau_ff", "k_force")
+C_QREF, C_DQREF, C_KP, C_KD, C_TFF, C_KF = range(6)
+COMMAND_SHAPE = (len(COMMAND_FIELDS), N_LEGS, 2)
+
 
 def model_vector(p: HexapodParams) -> np.ndarray:
     """Pack the physical parameters of ``p`` into the engine's model vector ``P``."""

@@ -21,8 +21,9 @@ WRONG_SHAPE = "wrong names or sizes"   # decodes, but not the contract's joints 
 BAD_STAMP = "stamp outside the run"    # negative, not on a tick, ahead of the run or stale
 NON_FINITE = "non-finite values"       # NaN or infinity in a value array
 BAD_CONTENT = "unknown value"          # a string that is none of the allowed values
+NEGATIVE_GAIN = "negative drive gain"  # a drive command's kp, kd or k_force below zero
 CAUSES = (UNAUTHENTICATED, REPLAYED, UNDECODABLE, WRONG_SHAPE, BAD_STAMP, NON_FINITE,
-          BAD_CONTENT)
+          BAD_CONTENT, NEGATIVE_GAIN)
 
 NS = 1_000_000_000
 #: How far (simulated s) a message may be stamped ahead of the newest time a node knows ...
@@ -89,6 +90,16 @@ def check_stamp(stamp_ns: int, period_ns: int) -> int:
     return k
 
 
+def check_drive_gains(position: np.ndarray, velocity: np.ndarray, effort: np.ndarray,
+                      joints: int) -> None:
+    """Dropped if a drive command's gains (the entries after the first ``joints``: kp in
+    position, kd in velocity, k_force in effort; docs/controllers.md) are below zero."""
+    for name, arr in (("kp", position), ("kd", velocity), ("k_force", effort)):
+        gains = arr[joints:]
+        if gains.size and gains.min() < 0.0:
+            raise Dropped(NEGATIVE_GAIN, f"{name} = {float(gains.min()):g} (must be >= 0)")
+
+
 def check_finite(arrays: Iterable[np.ndarray]) -> None:
     """Dropped if any value is NaN or infinite.
 
@@ -147,6 +158,7 @@ class StampWindow:
             self.newest_wall = self.clock()
 
 
-__all__ = ["AHEAD_S", "RATE", "BAD_CONTENT", "BAD_STAMP", "CAUSES", "DropCounter", "Dropped",
+__all__ = ["AHEAD_S", "RATE", "BAD_CONTENT", "NEGATIVE_GAIN",
+           "BAD_STAMP", "CAUSES", "DropCounter", "Dropped",
            "NON_FINITE", "REPLAYED", "StampWindow", "UNAUTHENTICATED", "UNDECODABLE",
-           "WRONG_SHAPE", "check_finite", "check_stamp"]
+           "WRONG_SHAPE", "check_drive_gains", "check_finite", "check_stamp"]

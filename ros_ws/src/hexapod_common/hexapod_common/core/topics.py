@@ -15,7 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .layout import O_FF, O_FP, O_FV, O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ
+from .layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, COMMAND_SHAPE, O_FF, O_FP, O_FV,
+                     O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ)
 from .params import N_LEGS
 
 JOINT_STATES = "/hexapod/joint_states"
@@ -88,6 +89,10 @@ TICK_TOPICS = (CLOCK, JOINT_STATES, FOOT_FORCES, HIP_STATES, REFERENCE, JOINT_CO
 JOINT_NAMES = tuple(f"leg{i + 1}_{j}" for i in range(N_LEGS) for j in ("hip", "knee"))
 FOOT_NAMES = tuple(f"leg{i + 1}_foot_{a}" for i in range(N_LEGS) for a in ("x", "y"))
 HIP_NAMES = tuple(f"leg{i + 1}_hip_{a}" for i in range(N_LEGS) for a in ("x", "y"))
+#: /hexapod/joint_commands with drive gains (docs/controllers.md): the 12 joints, then
+#: ``<joint>/gains`` in the same order (position = kp, velocity = kd, effort = k_force).
+DRIVE_GAIN_NAMES = tuple(f"{n}/gains" for n in JOINT_NAMES)
+DRIVE_COMMAND_NAMES = JOINT_NAMES + DRIVE_GAIN_NAMES
 #: /hexapod/reference: joint references, then desired hip and foot Cartesian coordinates.
 REFERENCE_NAMES = JOINT_NAMES + HIP_NAMES + FOOT_NAMES
 
@@ -156,11 +161,34 @@ def command_columns(demand: np.ndarray) -> Columns:
     return Columns(JOINT_NAMES, np.zeros_like(eff), np.zeros_like(eff), eff)
 
 
+def drive_command_columns(cmd: np.ndarray) -> Columns:
+    """Columns of a 24-entry /hexapod/joint_commands from a drive command (6, 6, 2) (rows
+    layout.COMMAND_FIELDS): the joints carry (q_ref, dq_ref, tau_ff), their ``/gains``
+    entries (kp, kd, k_force)."""
+    c = np.asarray(cmd, dtype=float).reshape(6, 2 * N_LEGS)
+    return Columns(DRIVE_COMMAND_NAMES, np.concatenate([c[C_QREF], c[C_KP]]),
+                   np.concatenate([c[C_DQREF], c[C_KD]]), np.concatenate([c[C_TFF], c[C_KF]]))
+
+
+def drive_command(position: np.ndarray, velocity: np.ndarray, effort: np.ndarray
+                  ) -> np.ndarray:
+    """The drive command (6, 6, 2) of a 24-entry /hexapod/joint_commands (inverse of
+    :func:`drive_command_columns`)."""
+    n = 2 * N_LEGS
+    cmd = np.empty(COMMAND_SHAPE)
+    for row, arr, first in ((C_QREF, position, True), (C_KP, position, False),
+                            (C_DQREF, velocity, True), (C_KD, velocity, False),
+                            (C_TFF, effort, True), (C_KF, effort, False)):
+        a = np.asarray(arr, dtype=float)
+        cmd[row] = (a[:n] if first else a[n:2 * n]).reshape(N_LEGS, 2)
+    return cmd
+
+
 def stamp_ns(t: float) -> int:
     """Simulated time (s) -> integer nanoseconds, the stamp of every message of that tick."""
     return int(round(t * 1e9))
 
 
 __all__ = [n for n in dir() if n.isupper()] + [
-    "Columns", "TopicSpec", "command_columns", "obs_from_columns", "reference_columns",
-    "split_reference", "stamp_ns", "state_columns"]
+    "Columns", "TopicSpec", "command_columns", "drive_command", "drive_command_columns",
+    "obs_from_columns", "reference_columns", "split_reference", "stamp_ns", "state_columns"]

@@ -187,6 +187,9 @@ class InputGuard:
             if tr is not None:
                 tr.mark(trace.DECODED, topic, view.stamp_ns)
             M.check_finite((view.position, view.velocity, view.effort))
+            if len(view.effort) > len(T.JOINT_NAMES) and topic == T.JOINT_COMMANDS:
+                M.check_drive_gains(view.position, view.velocity, view.effort,
+                                    len(T.JOINT_NAMES))
             M.check_stamp(view.stamp_ns, period_ns)
             if window is not None:
                 if advance:

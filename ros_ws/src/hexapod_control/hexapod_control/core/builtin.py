@@ -17,7 +17,7 @@ import numpy as np
 from hexapod_common.core.params import GainParams
 
 from .controller_api import Context, DriveCommand, Observation, param, torque_command
-from .controllers import PD_P, PD_PF, control_law, gain_vector
+from .controllers import PD_P, PD_PF, control_law, gain_vector, pd_pf_drive_command
 
 #: Force-loop placements of PD-P&F.
 FORCE_LOOPS = ("topic", "drive")
@@ -81,15 +81,9 @@ class PdPf(_Compiled):
         """Topic: the compiled law's T_C. Drive: the PD and force gains go to the drive."""
         if self.torque_only:
             return super().law(obs)
-        g = self.params
-        kf = g.kf
-        one = np.ones((6, 2))
-        kp = np.empty((6, 2))
-        kd = np.empty((6, 2))
-        kp[:, 0], kp[:, 1] = kf * g.kp1, kf * g.kp2
-        kd[:, 0], kd[:, 1] = kf * g.kd1, kf * g.kd2
-        return DriveCommand(obs.theta_d.copy(), obs.theta_vel_d.copy(), kp, kd,
-                            np.zeros((6, 2)), kf * one)
+        cmd = np.empty((6,) + self._out.shape)
+        pd_pf_drive_command(self.gains, obs.theta_d, obs.theta_vel_d, cmd)
+        return DriveCommand(*cmd)
 
 
 __all__ = ["FORCE_LOOPS", "PdP", "PdPf", "PdPfParams"]

@@ -29,7 +29,7 @@ import numba
 from numba import njit
 
 from hexapod_sim.core.actuator import saturate
-from hexapod_sim.core.drive import C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, drive_advance
+from hexapod_sim.core.drive import drive_advance
 from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, observe_prepared,
                                      scratch)
 from hexapod_sim.core.uneven_ground import GroundDraws, GroundRecord, touchdowns
@@ -45,7 +45,7 @@ from .batch_loop import MAX_BLOCK, block_plan, run_blocks
 from .controller_api import Observation
 from .builtin import PdPf
 from .controllers import (PD_P, PD_PF, PD_PF_DRIVE, control_law, controller_code,
-                          gain_vector)
+                          gain_vector, pd_pf_drive_command)
 
 #: Ticks per compiled block of a single run (bounds reference memory, paces progress bars).
 BLOCK_TICKS = 2000
@@ -110,18 +110,10 @@ def run_drive_ticks(s, P, gains, theta_d, theta_vel_d, torque, substeps, obs_out
     completed."""
     fh, work, ff, qdd = scratch()
     cmd = np.zeros((6, N_LEGS, 2))
-    kf = gains[4]
     n = theta_d.shape[0]
     for j in range(n):
         observe_prepared(s, torque, P, obs_out[j], fh, work, ff, qdd)
-        for i in range(N_LEGS):
-            for m in range(2):
-                cmd[C_QREF, i, m] = theta_d[j, i, m]
-                cmd[C_DQREF, i, m] = theta_vel_d[j, i, m]
-                cmd[C_KP, i, m] = kf * gains[2 * m]
-                cmd[C_KD, i, m] = kf * gains[2 * m + 1]
-                cmd[C_TFF, i, m] = 0.0
-                cmd[C_KF, i, m] = kf
+        pd_pf_drive_command(gains, theta_d[j], theta_vel_d[j], cmd)
         if not drive_advance(s, cmd, P, substeps, fh, work, ff, qdd, cmd_out[j], torque):
             return j
     return n

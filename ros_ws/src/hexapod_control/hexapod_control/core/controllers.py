@@ -15,7 +15,8 @@ import numpy as np
 from numba import njit
 
 from hexapod_common.core.kinematics import foot_force_torque
-from hexapod_common.core.layout import O_FF, O_TH, O_THV
+from hexapod_common.core.layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, O_FF, O_TH,
+                                        O_THV)
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import CONTROLLERS, GainParams, check_controller
 
@@ -70,5 +71,21 @@ def control_law(code, gains, obs, theta_d, theta_vel_d, l1, l2, out):  # type: i
             theta_vel_d[i, 1], l1, l2)
 
 
+@njit(cache=True)
+def pd_pf_drive_command(gains, theta_d, theta_vel_d, cmd):  # type: ignore[no-untyped-def]
+    """PD-P&F with its force loop in the drive (model.md "Drive interface"): the drive
+    command (6, 6, 2) into ``cmd``: q_ref, dq_ref the references (rad, rad/s), kp = K_f Kp,
+    kd = K_f Kd, tau_ff = 0, k_force = K_f. gains: (Kp1, Kd1, Kp2, Kd2, K_f)."""
+    kf = gains[4]
+    for i in range(theta_d.shape[0]):
+        for m in range(2):
+            cmd[C_QREF, i, m] = theta_d[i, m]
+            cmd[C_DQREF, i, m] = theta_vel_d[i, m]
+            cmd[C_KP, i, m] = kf * gains[2 * m]
+            cmd[C_KD, i, m] = kf * gains[2 * m + 1]
+            cmd[C_TFF, i, m] = 0.0
+            cmd[C_KF, i, m] = kf
+
+
 __all__ = ["PD_P", "PD_PF", "PD_PF_DRIVE", "control_law", "controller_code", "gain_vector",
-           "leg_demand"]
+           "leg_demand", "pd_pf_drive_command"]

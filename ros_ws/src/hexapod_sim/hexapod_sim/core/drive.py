@@ -29,13 +29,10 @@ from numba import njit
 from .actuator import clip_torque
 from .engine import prepare, solve, state_ok
 from hexapod_common.core.kinematics import foot_force_torque
-from hexapod_common.core.layout import P_DT, P_L1, P_L2, P_TMAX, Q0, V0
+from hexapod_common.core.layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF,
+                                        COMMAND_FIELDS, COMMAND_SHAPE, P_DT, P_L1, P_L2,
+                                        P_TMAX, Q0, V0)
 from hexapod_common.core.params import N_LEGS
-
-#: Rows of a drive command (6, 6, 2).
-C_QREF, C_DQREF, C_KP, C_KD, C_TFF, C_KF = range(6)
-COMMAND_FIELDS = ("q_ref", "dq_ref", "kp", "kd", "tau_ff", "k_force")
-COMMAND_SHAPE = (6, N_LEGS, 2)
 
 
 @njit(cache=True)

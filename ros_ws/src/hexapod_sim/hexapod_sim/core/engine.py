@@ -32,13 +32,12 @@ from .body import body_forces
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .uneven_ground import ground_factors, note_touchdown
-from hexapod_common.core.errors import DivergenceError
 from hexapod_common.core.gait import reference
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
-from hexapod_common.core.layout import (C0, OBS_FIELDS, OBS_SHAPE, P_BBX, P_BBY, P_BGX, P_BGY,
+from hexapod_common.core.layout import (C0, OBS_FIELDS, P_BBX, P_BBY, P_BGX, P_BGY,
                                         P_DT, P_G, P_HIPX, P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY,
                                         P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
-                                        legs, model_vector)
+                                        legs)
 from hexapod_common.core.params import N_LEGS, HexapodParams
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
@@ -282,57 +281,6 @@ def initial_state(p: HexapodParams) -> np.ndarray:
     return s
 
 
-class Physics:
-    """The stepping object the sim node and scripts use: owns the state and the model vector.
-
-    ``torque`` is the held actuator torque T_m (6, 2) (N m); :meth:`advance_tick` integrates
-    one control period with it; :meth:`observe` returns the tick's sample (9, 6, 2). The
-    first physics step of :meth:`advance_tick` reuses the state part that :meth:`observe`
-    computed at the same state (same numbers, bit for bit, as recomputing it).
-    """
-
-    def __init__(self, p: HexapodParams) -> None:
-        self.params = p
-        self.P = model_vector(p)
-        self.state = initial_state(p)
-        self.torque = np.zeros((N_LEGS, 2))
-        self.substeps = p.substeps
-        self.tick = 0
-        self._scratch = scratch()
-        self._prepared = False  # the scratch holds the state part of self.state, self.P
-
-    @property
-    def time(self) -> float:
-        """Simulated time of the current tick (s)."""
-        return self.tick * self.params.sim.control_period
-
-    def set_params(self, p: HexapodParams) -> None:
-        """Take new physical parameters (ground, actuator, ...) from the next step on."""
-        self.params = p
-        self.P = model_vector(p)
-        self._prepared = False
-
-    def observe(self) -> np.ndarray:
-        """Sample of the current tick: state and the torque acting now."""
-        obs = np.empty(OBS_SHAPE)
-        observe_prepared(self.state, self.torque, self.P, obs, *self._scratch)
-        self._prepared = True
-        return obs
-
-    def advance_tick(self, torque: np.ndarray) -> None:
-        """Hold ``torque`` (already saturated) for one control period and integrate it."""
-        self.torque = np.ascontiguousarray(torque, dtype=float).reshape(N_LEGS, 2)
-        fh, work, ff, qdd = self._scratch
-        if not self._prepared:
-            prepare(self.state, self.P, fh, work)
-        self._prepared = False
-        if not advance_prepared(self.state, self.torque, self.P, self.substeps, fh, work, ff,
-                                qdd):
-            raise DivergenceError(f"state diverged between t = {self.time:.4f} s and the next "
-                                  f"tick (non-finite or beyond {MAX_COORD:g})")
-        self.tick += 1
-
-
-__all__ = ["Physics", "W_SIZE", "accelerations", "advance", "advance_prepared", "initial_state",
+__all__ = ["W_SIZE", "accelerations", "advance", "advance_prepared", "initial_state",
            "leg_contact_solve", "observe", "observe_prepared", "prepare", "scratch", "solve",
            "state_ok"]

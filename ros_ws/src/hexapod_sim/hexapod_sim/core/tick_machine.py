@@ -36,8 +36,8 @@ import numpy.typing as npt
 from hexapod_common.core import labels as L
 from hexapod_common.core import trace as _trace
 from .actuator import saturate
-from .engine import Physics
-from hexapod_common.core.layout import O_THV, P_TMAX
+from .physics import Physics
+from hexapod_common.core.layout import C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, O_THV, P_TMAX
 from hexapod_common.core.params import N_LEGS, HexapodParams
 from hexapod_common.core.topics import stamp_ns
 
@@ -113,6 +113,7 @@ class TickMachine:
         self.pending_controller: str | None = None
         self.pending_params: HexapodParams | None = None
         self.torque = np.zeros((N_LEGS, 2))
+        self.drive: FloatArray | None = None  # the drive command held (None: a torque)
         self.obs = physics.observe()
         self.source = L.COMMANDED  # of the torque acting now
         self.stamp = -1            # stamp of the tick published last
@@ -199,7 +200,8 @@ class TickMachine:
     # ------------------------------------------------------------------ inputs
     def command(self, stamp_ns: int, controller: str, effort: FloatArray,
                 now: float) -> Outcome:
-        """A command (stamp, the controller that sent it, demanded torque (12,) or (6, 2))."""
+        """A command (stamp, the controller that sent it, and either the demanded torque
+        (12,) or (6, 2), or a drive command (6, 6, 2), see :func:`as_demand`)."""
         if self.finished:
             return Outcome.IGNORED
         if stamp_ns > max(self.stamp, 0):
@@ -212,14 +214,14 @@ class TickMachine:
                 self.late += 1
                 if (self.mode == "realtime" and not self.advanced
                         and stamp_ns > self.newest_stamp):
-                    self.newest = np.asarray(effort).reshape(N_LEGS, 2).copy()
+                    self.newest = as_demand(effort).copy()
                     self.newest_stamp = stamp_ns
                 return Outcome.LATE
             return Outcome.STALE
         self.answered = True
         lat = int((now - self.published_at) / LATENCY_BIN)
         self.latency[min(lat, LATENCY_BINS - 1)] += 1
-        demand = np.asarray(effort).reshape(N_LEGS, 2)
+        demand = as_demand(effort)
         if self.silent_ticks:
             self._controller_back()
         if self.mode == "lockstep":
@@ -292,8 +294,13 @@ class TickMachine:
         self.fallback = False
 
     def _step(self, demand: FloatArray | None) -> None:
-        """Apply a command (None: hold the torque, or damp in fallback), integrate one period,
-        apply what changes at the tick boundary, make the next tick ready."""
+        """Apply a command (None: hold it, or damp in fallback), integrate one period,
+        apply what changes at the tick boundary, make the next tick ready.
+
+        A torque (6, 2) is saturated and held over the period; a drive command (6, 6, 2)
+        is evaluated by the drive at every physics step. Held, the drive keeps its last
+        command, its position setpoint moving on with the velocity setpoint (as between
+        two commands); a held torque stays as it was."""
         P = self.physics.P
         self.source = L.COMMANDED
         if demand is None and self.started:
@@ -301,16 +308,26 @@ class TickMachine:
             _mark(self.not_commanded, self.tick)
             if self.fallback:
                 _mark(self.fallback_ranges, self.tick)
-        if demand is not None:
+        if demand is not None and demand.ndim == 3:
+            self.drive = demand
+        elif demand is not None:
+            self.drive = None
             saturate(demand, P[P_TMAX], self.torque)
         elif self.fallback:
+            self.drive = None
             damping = -self.params().sim.fallback_damping * self.obs[O_THV]
             saturate(damping, P[P_TMAX], self.torque)
+        elif self.drive is not None:
+            self.drive[C_QREF] += self.drive[C_DQREF] * self.period
         # else: hold self.torque, the torque applied over the last period
         tr = _trace.TRACER
         if tr is not None:
             tr.mark(_trace.STEP0, stamp=self.stamp)
-        self.physics.advance_tick(self.torque)
+        if self.drive is not None:
+            self.physics.advance_drive(self.drive)
+            self.torque[:] = self.physics.torque
+        else:
+            self.physics.advance_tick(self.torque)
         if tr is not None:
             tr.mark(_trace.STEP1, stamp=self.stamp)
         self.hooks.at_boundary(self.tick)
@@ -352,6 +369,20 @@ class TickMachine:
                 "fallback_ticks": self.fallback_ranges}
 
 
+def as_demand(command: FloatArray) -> FloatArray:
+    """A command as the machine applies it: a torque (6, 2) from (12,) or (6, 2) values; a
+    drive command (6, 6, 2) from 72 values (rows layout.COMMAND_FIELDS), or its tau_ff
+    (6, 2) when every gain is zero (a torque-only command is a torque, bit for bit)."""
+    a = np.asarray(command, dtype=float)
+    if a.size == N_LEGS * 2:
+        return a.reshape(N_LEGS, 2)
+    cmd = a.reshape(6, N_LEGS, 2)
+    if not (cmd[C_KP].any() or cmd[C_KD].any() or cmd[C_KF].any()):
+        torque: FloatArray = cmd[C_TFF]
+        return torque
+    return cmd
+
+
 def _mark(ranges: list[list[int]], k: int) -> None:
     """Add tick ``k`` to a list of [a, b) ranges (merged; at most MAX_RANGES kept)."""
     if ranges and ranges[-1][1] == k:
@@ -370,4 +401,5 @@ __all__ = [
     "Outcome",
     "TickMachine",
     "Wait",
+    "as_demand",
 ]
