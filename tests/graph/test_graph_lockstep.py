@@ -146,3 +146,34 @@ def test_pd_pf_with_its_force_loop_in_the_drive_equals_the_engine_over_the_wire(
         _, _, raw = next(reader.messages(connections=conns))
         msg = reader.deserialize(raw, conns[0].msgtype)
     assert list(msg.name) == list(T.DRIVE_COMMAND_NAMES) and len(msg.effort) == 24
+
+
+def test_a_plugin_law_on_the_graph_equals_the_engine(make_graph, tmp_path):
+    # pd_alpha (a plain-Python plug-in, hexapod_control.core.pd_alpha) runs in the generic
+    # controller node (named as the controller), the law called per tick exactly as the
+    # engine's closed loop calls it: the lockstep run equals `run(p, "pd_alpha")`.
+    bag = tmp_path / "bag"
+    duration = 0.5
+    g = make_graph()
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    g.start("pd_alpha")
+    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+            "run.controller:=pd_alpha", "wait_for:=trajectory_generator,pd_alpha,metrics")
+    summary = finish_recorded_run(g, 300)
+    assert summary["missed"] == 0 and summary["late"] == 0
+    assert "configured: PdAlphaParams(" in g.log("pd_alpha")
+
+    p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD})
+    ref = run(p, "pd_alpha", duration)
+    n = ref.obs.shape[0]
+    with open_bag(bag) as b:
+        cols = {}
+        for topic in T.STATE_TOPICS:
+            a = read_joint_state_arrays(b, topic)
+            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
+            cols[topic] = (a.position, a.velocity, a.effort)
+        np.testing.assert_array_equal(T.obs_from_columns(cols), ref.obs)
+        cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
+        assert cmd.names == T.JOINT_NAMES  # torque-only: the 12-entry form
+        np.testing.assert_array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)

@@ -143,12 +143,17 @@ class GraphProcesses:
         (``"stop_at_end:=true"``); ``nice`` defaults to :data:`NICE` of the node; ``prefix``
         is a command to run it under (e.g. ``("chrt", "-f", "10")``)."""
         node = node or name
-        module, func = NODES[node]
+        if node in NODES:
+            module, func = NODES[node]
+            call = f"{func}()"
+        else:  # a plug-in controller's node (named as the controller): the generic node
+            module, func = "hexapod_control.controller_node", "main_controller"
+            call = f"{func}({node!r})"
         nice = NICE.get(node, 0) if nice is None else nice
         args = list(prefix) + (["nice", "-n", str(nice)] if nice else [])
         args += [sys.executable, "-c",
                  "import sys; from hexapod_common.runtime.lifeline import die_with_parent; "
-                 f"die_with_parent(); from {module} import {func}; sys.exit({func}())",
+                 f"die_with_parent(); from {module} import {func}; sys.exit({call})",
                  "--ros-args"]
         if self.params:
             args += ["--params-file", str(self.params)]

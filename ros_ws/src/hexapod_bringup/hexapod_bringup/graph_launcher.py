@@ -40,6 +40,7 @@ import yaml
 
 from hexapod_control.core.waits import parse as parse_waits
 from hexapod_common.core.errors import HexapodError
+from hexapod_common.core.controller_names import node_of
 from hexapod_common.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
 from hexapod_common.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                         default_params_path, load_params, read_params_file)
@@ -325,6 +326,8 @@ class Launcher:
         g.start("trajectory_generator")
         for c in join.builtins(self.args):
             g.start(f"{c}_controller")
+        for c in join.plugins(self.args):
+            g.start(node_of(c))
         for line in join.join_lines(g.env, os.environ.get("ROS_DOMAIN_ID", "0")):
             print(line, flush=True)
         if self.args.markers or self.args.foxglove is not None:
@@ -397,7 +400,8 @@ class Launcher:
         g = self.graph
         if g is None:
             return
-        for name in STOP_ORDER:
+        plugin_nodes = [node_of(c) for c in join.plugins(self.args)]
+        for name in STOP_ORDER[:-1] + tuple(plugin_nodes) + STOP_ORDER[-1:]:
             if name not in g.procs:
                 continue
             was_running = g.procs[name].poll() is None

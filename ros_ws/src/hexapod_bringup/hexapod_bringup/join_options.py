@@ -3,7 +3,8 @@
 * ``--no-builtin pd_p,pd_pf``: start without one or both built-in controller nodes (their
   places can be taken by nodes that join);
 * ``--controller NAME`` may name a controller that is not built in: the sim then starts
-  with ``NAME`` in charge and tick 0 waits (``startup_timeout``) for its node;
+  with ``NAME`` in charge and tick 0 waits (``startup_timeout``) for its node; for a
+  registered plug-in (e.g. ``pd_alpha``) the launcher starts that node (:func:`plugins`);
 * :func:`join_lines`: how an external node joins this run (key file, domain, helper).
 """
 from __future__ import annotations
@@ -49,6 +50,16 @@ def builtins(args: argparse.Namespace) -> tuple[str, ...]:
     return tuple(c for c in engine_names() if c not in args.no_builtin)
 
 
+def plugins(args: argparse.Namespace) -> tuple[str, ...]:
+    """Registered plug-in controllers (``hexapod controllers``; not pd_p / pd_pf) this run
+    starts a node for: ``--controller`` when it names one (the node is named as the
+    controller and runs its law per tick, as the engine does)."""
+    from hexapod_common.core.params import controller_names
+
+    c = args.controller
+    return (c,) if c not in engine_names() and c in controller_names() else ()
+
+
 def check(args: argparse.Namespace) -> None:
     """Refuse contradictory options (HexapodError, one line)."""
     started = builtins(args)
@@ -91,4 +102,4 @@ def join_lines(env: Mapping[str, str], domain: str) -> list[str]:
 
 
 __all__ = ["add_options", "builtin_list", "builtins", "check", "controller_arg",
-           "default_switch_to", "join_lines", "wait_for"]
+           "default_switch_to", "join_lines", "plugins", "wait_for"]

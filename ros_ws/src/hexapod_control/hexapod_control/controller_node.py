@@ -1,4 +1,10 @@
-"""Lifecycle nodes ``pd_p_controller`` and ``pd_pf_controller``: one class, two architectures.
+"""Lifecycle nodes ``pd_p_controller``, ``pd_pf_controller`` and one per registered plug-in.
+
+PD-P and PD-P&F run their compiled law (PD-P&F with ``pd_pf.force_loop: drive`` sends
+24-entry drive commands); a registered plug-in (``hexapod controllers``, e.g. ``pd_alpha``)
+runs in a node named as the controller, its ``law`` called per tick through
+``controller_api.call_law`` as the engine's closed loop calls it (hip rows of its
+observation NaN: the node does not take ``/hexapod/hip_states``).
 
 Lifecycle: *configure* reads the gains (``pd_p.*`` or ``pd_pf.*``; they may also change
 while running), creates the command publisher and subscribes to the reference and the foot
@@ -60,9 +66,15 @@ from sensor_msgs.msg import JointState
 from hexapod_common.runtime import conversions as C
 from hexapod_common.runtime import inputs_matched
 
-from hexapod_common.core.layout import COMMAND_SHAPE
+from hexapod_common.core.controller_names import node_of
+from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.layout import C_KD, C_KF, C_KP, C_TFF, COMMAND_SHAPE, O_HF, O_HP, O_HV
+from hexapod_common.core.params import CONTROLLERS, controller_group
 
-from .core.controllers import control_law, controller_code, gain_vector, pd_pf_drive_command
+from .core import registry
+from .core.controller_api import call_law
+from .core.controllers import (PD_P, control_law, controller_code, gain_vector,
+                               pd_pf_drive_command)
 from .core.waits import InputWaits
 
 MAX_BUFFERED = 10000  # stamps kept per buffered topic at most
@@ -79,8 +91,12 @@ class ControllerNode(LifecycleNode):
 
     def __init__(self, architecture: str) -> None:
         self.arch = architecture
-        self.code = controller_code(architecture)
-        super().__init__(f"{architecture}_controller")
+        # A registered plug-in (not pd_p / pd_pf): its Python law through call_law, the
+        # engine's per-tick loop; the node is named as the controller (node_of).
+        self.plugin = architecture not in CONTROLLERS
+        self.code = PD_P if self.plugin else controller_code(architecture)
+        self.ctrl: Any = None
+        super().__init__(node_of(architecture))
         self.log = FastLogger(self.get_logger().name)
         self.guard = InputGuard(self, self.log)
         # The states are this node's time source: strictly increasing, at most
@@ -137,7 +153,10 @@ class ControllerNode(LifecycleNode):
         self.input_floor = -1  # inputs of ticks before it are not needed (no state to answer)
         self._load_gains(self.binding.params)
         self.period_ns = int(round(self.binding.params.sim.control_period * 1e9))
-        self._law()  # warm up the compiled law before the first tick
+        if self.plugin:  # not sent to controllers: NaN, never a plausible number
+            self.obs[O_HP] = self.obs[O_HV] = self.obs[O_HF] = np.nan
+        else:
+            self._law()  # warm up the compiled law before the first tick
         self.last_state = -1  # stamp of the newest state of ours (ns)
         self.announcer = ParamAnnouncer(self, self.binding.params.sim.control_period,
                                         self._next_tick)
@@ -152,13 +171,22 @@ class ControllerNode(LifecycleNode):
     # ------------------------------------------------------------------ parameters
     def _load_gains(self, p: HexapodParams) -> None:
         g = p.gains(self.arch)
+        self.period = p.sim.control_period
+        if self.plugin:  # a fresh, reset instance (as the engine's when parameters change)
+            self.ctrl = registry.create(self.arch, p)
+            self.gains = np.zeros(5)
+            self.drive = False
+            self.described = repr(g)
+            return
         self.gains = gain_vector(g)
+        self.described = (f"gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
+                          f"{tuple(float(x) for x in self.gains)}")
         # PD-P&F with its force loop in the drive: the command carries the drive's gains
         self.drive = str(getattr(g, "force_loop", "topic")) == "drive"
         self.l1, self.l2 = p.robot.leg_length_1, p.robot.leg_length_2
 
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
-        if any(n.startswith(self.arch + ".") for n in names):
+        if any(n.startswith(controller_group(self.arch) + ".") for n in names):
             self._load_gains(p)
 
     # ------------------------------------------------------------------ lifecycle
@@ -173,8 +201,7 @@ class ControllerNode(LifecycleNode):
         self.subs[T.FOOT_FORCES] = self.loop.subscribe(
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
-        self.log.info(f"configured: gains (Kp1, Kd1, Kp2, Kd2, K_f) = "
-                      f"{tuple(float(g) for g in self.gains)}"
+        self.log.info(f"configured: {self.described}"
                       + ("; force loop in the drive (24-entry drive commands)"
                          if self.drive else ""))
         self._entered("inactive")
@@ -329,6 +356,9 @@ class ControllerNode(LifecycleNode):
         stamp = js.stamp_ns
         self.input_floor = min(self.pending, default=stamp)
         mine = in_charge(js.frame_id) == self.arch and self.active
+        if mine and not self.in_charge and self.plugin:
+            # takes charge: a fresh, reset instance (the engine's closed loop does the same)
+            self.ctrl = registry.create(self.arch, self.binding.params)
         self.in_charge = mine
         if mine and T.REFERENCE in self.subs:
             self._check_unchecked(stamp)  # this tick's, kept while another was in charge
@@ -392,7 +422,12 @@ class ControllerNode(LifecycleNode):
             tr = _trace.TRACER
             if tr is not None:
                 tr.mark(_trace.LAW0, stamp=stamp)
-            if self.drive:
+            if self.plugin:
+                t = C.tick_of(stamp, self.period_ns) * self.period
+                cmd = call_law(self.ctrl, t, self.obs, self.theta_d, self.theta_vel_d)
+                c = (T.drive_command_columns(cmd) if has_gains(cmd)
+                     else T.command_columns(cmd[C_TFF]))
+            elif self.drive:
                 pd_pf_drive_command(self.gains, self.theta_d, self.theta_vel_d, self.cmd)
                 c = T.drive_command_columns(self.cmd)
             else:
@@ -417,6 +452,11 @@ class ControllerNode(LifecycleNode):
                     self.l2, self.demand)
 
 
+def has_gains(cmd: np.ndarray) -> bool:
+    """True if the drive command (6, 6, 2) sets a drive gain (else it is torque-only)."""
+    return bool(cmd[C_KP].any() or cmd[C_KD].any() or cmd[C_KF].any())
+
+
 def _start(node: ControllerNode) -> None:
     if node.autostart:
         node.trigger_configure()
@@ -434,8 +474,21 @@ def _finish(node: ControllerNode, code: int) -> int:
 
 
 def _main(architecture: str, args: list[str] | None) -> int:
-    return run_node(f"{architecture}_controller", lambda: ControllerNode(architecture), args,
+    return run_node(node_of(architecture), lambda: ControllerNode(architecture), args,
                     start=_start, finish=_finish)
+
+
+def main_controller(name: str, args: list[str] | None = None) -> int:
+    """Entry point of the node of any registered controller (``hexapod controllers``): the
+    built-ins' nodes, or a plug-in's law run per tick as the engine runs it."""
+    from hexapod_common.core.params import check_controller
+
+    try:
+        name = check_controller(name)
+    except ParameterError as err:
+        print(f"controller_node: error: {err}", file=sys.stderr)
+        return 2
+    return _main(name, args)
 
 
 def main_pd_p(args: list[str] | None = None) -> int:
@@ -449,5 +502,5 @@ def main_pd_pf(args: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(_main(sys.argv[1] if len(sys.argv) > 1 and sys.argv[1] in ("pd_p", "pd_pf")
-                   else "pd_pf", None))
+    sys.exit(main_controller(sys.argv[1] if len(sys.argv) > 1 and not
+                             sys.argv[1].startswith("-") else "pd_pf"))

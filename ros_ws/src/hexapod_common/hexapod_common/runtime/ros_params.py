@@ -41,8 +41,8 @@ from rclpy.parameter import Parameter
 
 from ..core.errors import ParameterError
 from ..core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams, Spec,
-                           check_spec, check_value, from_flat, load_params, nearest,
-                           unknown_parameter)
+                           check_spec, check_value, controller_group, controller_names,
+                           from_flat, load_params, nearest, unknown_parameter)
 
 #: Parameters (or groups, with a trailing '.') that may change while the graph runs.
 LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
@@ -68,8 +68,14 @@ def _matches(name: str, patterns: tuple[str, ...]) -> bool:
 
 
 def used_by(node_name: str) -> list[str]:
-    """The model parameters node ``node_name`` declares (all of them for an unknown node)."""
+    """The model parameters node ``node_name`` declares (all of them for an unknown node; a
+    plug-in controller's node, named as the controller (controller_names.node_of): its
+    group, the link lengths and the control period)."""
     patterns = USES.get(node_name)
+    if patterns is None and node_name in controller_names():
+        group = controller_group(node_name)
+        patterns = ("robot.leg_length_1", "robot.leg_length_2", "sim.control_period",
+                    f"{group}.")
     return [n for n in SPECS if patterns is None or _matches(n, patterns)]
 
 
@@ -179,7 +185,10 @@ def declare_node_param(node: Node, name: str) -> Any:
     outside the spec raises ParameterError. Read-only: the nodes read these once at start,
     so a runtime change is refused ("read-only") rather than accepted and ignored.
     """
-    spec = NODE_PARAMS[node.get_name()][name]
+    table = NODE_PARAMS.get(node.get_name())
+    if table is None and node.get_name() in controller_names():  # a plug-in's node
+        table = NODE_PARAMS["pd_p_controller"]
+    spec = table[name]  # type: ignore[index]
     value = node.declare_parameter(name, spec.default, ParameterDescriptor(
         name=name, description=f"{spec.description}; allowed {spec.allowed()} "
         f"(read at start: read-only)", dynamic_typing=True, read_only=True)).value

@@ -34,7 +34,7 @@ from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, o
                                      scratch)
 from hexapod_sim.core.uneven_ground import GroundDraws, GroundRecord, touchdowns
 from hexapod_common.core.gait import Reference, reference
-from hexapod_common.core.layout import (O_FF, O_TH, O_THV, O_TQ, OBS_SHAPE, P_L1, P_L2,
+from hexapod_common.core.layout import (OBS_SHAPE, P_L1, P_L2,
                                         P_TMAX, model_vector)
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import (N_LEGS, HexapodParams, check_controller,
@@ -42,7 +42,7 @@ from hexapod_common.core.params import (N_LEGS, HexapodParams, check_controller,
 
 from . import registry
 from .batch_loop import MAX_BLOCK, block_plan, run_blocks
-from .controller_api import Observation
+from .controller_api import call_law
 from .builtin import PdPf
 from .controllers import (PD_P, PD_PF, PD_PF_DRIVE, control_law, controller_code,
                           gain_vector, pd_pf_drive_command)
@@ -120,22 +120,19 @@ def run_drive_ticks(s, P, gains, theta_d, theta_vel_d, torque, substeps, obs_out
 
 
 def run_plugin_ticks(s: np.ndarray, P: np.ndarray, ctrl: Any, theta_d: np.ndarray,
-                     theta_vel_d: np.ndarray, torque: np.ndarray, substeps: int, t0: float,
+                     theta_vel_d: np.ndarray, torque: np.ndarray, substeps: int, k0: int,
                      period: float, obs_out: np.ndarray, cmd_out: np.ndarray) -> int:
     """Run len(theta_d) ticks of controller instance ``ctrl`` (its ``law``) in place on
-    state ``s`` and the acting ``torque`` (6, 2), the first at time t0 (s), through the
-    drive. Records every tick's sample into obs_out[j] and the first physics step's
-    unsaturated torque into cmd_out[j]. Returns the number of ticks completed (less than
-    requested if the state diverged)."""
+    state ``s`` and the acting ``torque`` (6, 2), the first being tick ``k0`` (time
+    k0 * period s), through the drive. Records every tick's sample into obs_out[j] and the
+    first physics step's unsaturated torque into cmd_out[j]. Returns the number of ticks
+    completed (less than requested if the state diverged)."""
     fh, work, ff, qdd = scratch()
     n = int(theta_d.shape[0])
     for j in range(n):
         obs = obs_out[j]
         observe_prepared(s, torque, P, obs, fh, work, ff, qdd)
-        raw = obs.copy()
-        o = Observation(t0 + j * period, raw[O_TH], raw[O_THV], raw[O_FF], theta_d[j].copy(),
-                        theta_vel_d[j].copy(), raw[O_TQ], raw)
-        cmd = ctrl.law(o).stacked()
+        cmd = call_law(ctrl, (k0 + j) * period, obs, theta_d[j], theta_vel_d[j])
         if not drive_advance(s, cmd, P, substeps, fh, work, ff, qdd, cmd_out[j], torque):
             return j
     return n
@@ -276,7 +273,7 @@ def run(p: HexapodParams, controller: str | None = None, duration: float | None 
                 # takes charge (or its parameters changed): a fresh, reset instance
                 active = (who, cur.gains(who), registry.create(who, cur))
             done = run_plugin_ticks(s, P, active[2], ref.theta[k0:k1], ref.theta_vel[k0:k1],
-                                    torque, p.substeps, float(t[k0]), p.sim.control_period,
+                                    torque, p.substeps, k0, p.sim.control_period,
                                     obs[k0:k1], cmd[k0:k1])
         if progress is not None:
             progress(k0 + done, n)

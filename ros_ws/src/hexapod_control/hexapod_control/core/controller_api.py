@@ -25,6 +25,7 @@ from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
+from hexapod_common.core.layout import O_FF, O_TH, O_THV, O_TQ
 from hexapod_common.core.params import Spec
 
 #: Shape of every per-joint array: (legs, joints).
@@ -96,6 +97,20 @@ def torque_command(torque: np.ndarray) -> DriveCommand:
     return DriveCommand(z, z, z, z, np.asarray(torque, dtype=float), z)
 
 
+def call_law(ctrl: Any, t: float, raw: np.ndarray, theta_d: np.ndarray,
+             theta_vel_d: np.ndarray) -> np.ndarray:
+    """One tick of a controller instance: its ``law`` on the sample ``raw`` (9, 6, 2) at
+    time ``t`` (s) with references theta_d, theta_vel_d (6, 2) (rad, rad/s), as the drive
+    command (6, 6, 2) (rows layout.COMMAND_FIELDS). The law gets copies: what it keeps or
+    changes never reaches the caller's arrays. The engine's per-tick loop and the graph's
+    controller node both call this."""
+    raw = raw.copy()
+    o = Observation(t, raw[O_TH], raw[O_THV], raw[O_FF], theta_d.copy(), theta_vel_d.copy(),
+                    raw[O_TQ], raw)
+    cmd: np.ndarray = ctrl.law(o).stacked()
+    return cmd
+
+
 @runtime_checkable
 class Controller(Protocol):
     """What a controller class provides (see the module docstring)."""
@@ -118,5 +133,5 @@ def param(description: str, lo: float | None = None, hi: float | None = None, *,
     return field(default=default, metadata={"spec": spec})
 
 
-__all__ = ["Context", "Controller", "DriveCommand", "JOINT_SHAPE", "Observation", "param",
-           "torque_command"]
+__all__ = ["Context", "Controller", "DriveCommand", "JOINT_SHAPE", "Observation", "call_law",
+           "param", "torque_command"]
