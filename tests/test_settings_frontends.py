@@ -259,3 +259,22 @@ def test_yaml_numbers_are_numbers_in_the_cli(tmp_path):
     r = hexapod("simulate", "--params", str(f), "--controller", "pd_p", "--duration", "1")
     assert r.returncode == 0, r.stderr
     assert "T_max = 150 N m" in r.stdout
+
+
+def test_one_default_scenario_in_every_front_end():
+    """run_graph's lockstep default is the params file's scenario, which `hexapod simulate`
+    and `hexapod reproduce` run: the same parameters, so (lockstep graph == engine, the
+    graph tests) the same recorded motion. Realtime mode's own default (1 kHz, PD-P&F's
+    force loop in the drive) is explicit and printed."""
+    from hexapod_bringup.graph_launcher import build_parser, convergence_note, settings
+    from hexapod_common.core.params import load_params
+
+    parse = build_parser().parse_args
+    p, _ = settings(parse(["--no-switch", "--duration", "3"]))
+    assert p == load_params(**{"run.duration": 3.0})
+    assert p.sim.control_period == 1e-4 and p.pd_pf.force_loop == "topic"
+    rt, _ = settings(parse(["--mode", "realtime", "--duration", "3"]))
+    assert rt.sim.control_period == 1e-3 and rt.pd_pf.force_loop == "drive"
+    assert "force loop in the drive" in convergence_note(rt)
+    own, _ = settings(parse(["--mode", "realtime", "--control-rate", "2000"]))
+    assert own.sim.control_period == 5e-4 and own.pd_pf.force_loop == "topic"
