@@ -53,3 +53,23 @@ def test_reproduce_quick_writes_report_with_all_claims(tmp_path):
         assert list(out.glob(f"fig{n:02d}_*.png")), f"figure {n} missing"
     assert list(out.glob("fig_e6_map_tmax400.png")) and list(out.glob("fig_e6_eps_xH_*.png"))
     assert doc["pd_p_kp1"]["best"] in doc["pd_p_kp1"]["values"]
+    # E6's drive rows: the counts of points within 1 %/1 mm of 10 kHz over topics, as the
+    # CSV's numbers give them
+    import csv
+
+    rows = list(csv.DictReader((out / "e6_control_rate.csv").open()))
+    ref = {(r["actuator.t_max"], r["ground.scale"]): r for r in rows
+           if r["force_loop"] == "topic" and r["controller"] == "pd_pf"
+           and float(r["rate_hz"]) == 10000.0}
+    for rate in (1000.0, 10000.0):
+        drive = [r for r in rows if r["force_loop"] == "drive" and float(r["rate_hz"]) == rate]
+        assert len(drive) == len(ref)
+        within = sum(
+            all(abs(float(d[n]) - float(b[n])) <= 0.01 * abs(float(b[n])) for n in ("E_av", "T_L"))
+            and all(abs(float(d[n]) - float(b[n])) <= 1e-3
+                    for n in ("eps_xH", "eps_yH", "eps_xF", "eps_yF"))
+            for d in drive for b in [ref[(d["actuator.t_max"], d["ground.scale"])]])
+        hz = f"{rate / 1000:g} kHz"
+        table = text.split("**PD-P&F with its force loop in the drive**")[1].splitlines()
+        cells = [line.split("|") for line in table if line.startswith(f"| {hz} |")][0]
+        assert cells[3].strip() == f"{within}/{len(ref)}", (hz, within, cells)

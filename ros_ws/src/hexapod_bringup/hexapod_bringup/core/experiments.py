@@ -145,14 +145,18 @@ class RateResult:
     t_max_values: tuple[float, ...]
     percents: tuple[float, ...]
     sweeps: dict[tuple[float, float], SweepResult]
+    #: PD-P&F with its force loop in the drive (pd_pf.force_loop = drive) at the same
+    #: (rate, T_max) keys, one Convergence per ground percentage
+    drive: dict[tuple[float, float], list[Convergence]] = field(default_factory=dict)
 
 
 def rate_experiment(p: HexapodParams, rates: Sequence[float], percents: Sequence[float],
                     t_max_values: Sequence[float], duration: float | None = None,
                     backend: Backend | None = None, progress: Progress | None = None
                     ) -> RateResult:
-    """E6: every control rate x ground percentage x T_max x both controllers, each point
-    checked at dt, dt/2 and dt/4 (one batch of all runs; ``progress`` counts runs)."""
+    """E6: every control rate x ground percentage x T_max x both controllers, and PD-P&F
+    with its force loop in the drive, each point checked at dt, dt/2 and dt/4 (one batch of
+    all runs; ``progress`` counts runs)."""
     duration = p.run.duration if duration is None else duration
     keys = [(float(r), float(t)) for r in rates for t in t_max_values]
     scales = np.asarray(percents, dtype=float) / 100.0
@@ -162,8 +166,15 @@ def rate_experiment(p: HexapodParams, rates: Sequence[float], percents: Sequence
                              "actuator.t_max": t_max})
         cases += [Case(q.with_values(**{"ground.scale": float(s)}), c)
                   for c in CONTROLLERS for s in scales]
+    for rate, t_max in keys:
+        q = p.with_values(**{"sim.control_period": control_period_of(rate),
+                             "actuator.t_max": t_max, "pd_pf.force_loop": "drive"})
+        cases += [Case(q.with_values(**{"ground.scale": float(s)}), "pd_pf") for s in scales]
     checks = check_cases(cases, duration, backend, progress)
     n, per_key = len(scales), len(scales) * len(CONTROLLERS)
+    first_drive = len(keys) * per_key
+    drive = {key: list(checks[first_drive + j * n:first_drive + (j + 1) * n])
+             for j, key in enumerate(keys)}
     sweeps = {}
     for j, key in enumerate(keys):
         block = checks[j * per_key:(j + 1) * per_key]
@@ -173,7 +184,7 @@ def rate_experiment(p: HexapodParams, rates: Sequence[float], percents: Sequence
                                   {"sim.control_period": control_period_of(key[0]),
                                    "actuator.t_max": key[1]}, conv)
     return RateResult(tuple(float(r) for r in rates), tuple(float(t) for t in t_max_values),
-                      tuple(float(x) for x in percents), sweeps)
+                      tuple(float(x) for x in percents), sweeps, drive)
 
 
 # -- E5: brute-force tuning ----------------------------------------------------------
