@@ -45,6 +45,17 @@ def test_reproduce_quick_writes_report_with_all_claims(tmp_path):
     assert doc["control_rate_hz"] == 10000.0
     # E8 (uneven ground, intervals) and E5 by CMA-ES next to the grid
     assert "## E8" in text and "### E5 by CMA-ES" in text
+    # E7: PD^alpha beside the paper's controllers, at the base case and over the ground
+    e7 = text.split("## E7")[1].split("## E8")[0]
+    assert "| index | unit | PD-P |" in e7 and "| PD^α |" in e7
+    assert set(doc["e7"]["base"]) == {"pd_p", "pd_pf", "pd_alpha"}
+    assert [r["pd_alpha.alpha"] for r in doc["e7"]["alpha"]] == [0.75, 1.0, 1.25]
+    assert (out / "fig_e7_alpha.png").exists() and (out / "fig_e7_ground_tmax400.png").exists()
+    # with alpha = 1 and PD-P's gains, PD^alpha comes within 1 % of PD-P (its rate term is a
+    # backward difference of the error instead of the measured rate)
+    pp, pa = doc["e7"]["base"]["pd_p"]["runs"][0], doc["e7"]["base"]["pd_alpha"]["runs"][0]
+    for n in ("E_av", "T_L", "eps_xH"):
+        assert abs(pa[n] - pp[n]) <= 0.01 * abs(pp[n]), n
     assert len(doc["e8"]["points"]) == 4 and doc["e8"]["seeds"] == 3
     for c in ("pd_p", "pd_pf"):
         cma = doc["tuning_cmaes"][c]

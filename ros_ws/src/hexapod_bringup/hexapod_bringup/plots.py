@@ -13,8 +13,9 @@ import numpy as np
 from .core.experiments import SweepResult
 from hexapod_metrics.core.indices import INDEX_UNITS
 
-LABELS = {"pd_p": "PD-P", "pd_pf": "PD-P&F"}
-STYLES = {"pd_p": dict(color="tab:blue"), "pd_pf": dict(color="tab:red")}
+LABELS = {"pd_p": "PD-P", "pd_pf": "PD-P&F", "pd_alpha": "PD^α"}
+STYLES = {"pd_p": dict(color="tab:blue"), "pd_pf": dict(color="tab:red"),
+          "pd_alpha": dict(color="tab:green")}
 
 
 def _pyplot():  # type: ignore[no-untyped-def]

@@ -27,7 +27,7 @@ from hexapod_bringup.core import claims
 from .core.claims import Measured
 from .core.convergence import REFINEMENTS, Convergence, check_cases, refined
 from .core.experiments import (RateResult, SweepResult, TuneResult, ground_sweep,
-                               rate_experiment, t_max_sweep, tune)
+                               rate_experiment, sweep, t_max_sweep, tune)
 from hexapod_metrics.core.indices import INDEX_NAMES, INDEX_UNITS, REPORTED_NAMES
 from .core.parallel import Backend
 from .core.simulate import Simulation, simulate, window_ticks
@@ -59,6 +59,9 @@ class Plan:
     e8_t_max: tuple[float, ...] = (400.0, 170.0)
     e8_seeds: int = 10
     cmaes_budget: int = 62
+    e7_percents: tuple[float, ...] = (10.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
+    e7_t_max: tuple[float, ...] = (400.0, 170.0)
+    e7_alphas: tuple[float, ...] = (0.5, 0.75, 0.9, 1.0, 1.1, 1.25, 1.5)
 
     @staticmethod
     def quick() -> "Plan":
@@ -68,7 +71,8 @@ class Plan:
                     kp1_values=(20000.0, 100000.0), rates=(1000.0, 10000.0),
                     rate_percents=(100.0, 300.0), rate_t_max=(400.0,),
                     e8_percents=(100.0, 500.0), e8_spreads=(0.0, 30.0), e8_t_max=(400.0,),
-                    e8_seeds=3, cmaes_budget=16)
+                    e8_seeds=3, cmaes_budget=16, e7_percents=(100.0, 500.0),
+                    e7_t_max=(400.0,), e7_alphas=(0.75, 1.0, 1.25))
 
 
 def _no_progress(label: str, total: int) -> Callable[[int], None]:
@@ -381,6 +385,63 @@ def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float) -
     return md
 
 
+#: E7's controllers: the paper's two and the authors' fractional PD^alpha (pd_alpha.py).
+E7_CONTROLLERS = ("pd_p", "pd_pf", "pd_alpha")
+
+
+def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backend,
+                progress: Callable[[str, int], Callable[[int], None]], out: Path
+                ) -> tuple[list[str], dict[str, object]]:
+    """E7: PD^alpha against PD-P and PD-P&F at the base case and over the ground sweep at
+    each of plan.e7_t_max, with convergence bands, and its indices against alpha."""
+    g = p400.gains("pd_alpha")
+    md = ["## E7: the authors' PD^α against PD-P and PD-P&F (ours)", "",
+          "PD^α (Silva, Machado & Lopes 2004): T_C = Kp e + Kd D^α e per joint, D^α by a "
+          f"Grünwald-Letnikov series over the last {g.memory} control periods "
+          "(`hexapod_control/core/pd_alpha.py`, a plug-in written against the controller API "
+          f"only). Params file's gains: Kp1 {g.kp1:g}, Kd1 {g.kd1:g}, Kp2 {g.kp2:g}, Kd2 "
+          f"{g.kd2:g} (PD-P's), α = {g.alpha:g}. Every point at dt, dt/2 and dt/4.", "",
+          f"**Base case** (T_max = {p400.actuator.t_max:g} N m, base ground):", ""]
+    base = check_cases([Case(p400, c) for c in E7_CONTROLLERS], duration, backend,
+                       progress("E7 base case (runs)", len(E7_CONTROLLERS) * RUNS))
+    convs = dict(zip(E7_CONTROLLERS, base))
+    md += _indices_table({c: claims.point(cv) for c, cv in convs.items()}, convs) + [""]
+    doc: dict[str, object] = {"base": {c: cv.as_dict() for c, cv in convs.items()}}
+    md += ["**Ground sweep**: hip errors eps_xH and eps_yH of PD^α against each paper "
+           "controller, decided beyond both convergence bands (*better*: both below, "
+           "*worse*: one above, else *undecided*).", "",
+           "| T_max (N m) | ground % | vs PD-P | vs PD-P&F |", "|---|---|---|---|"]
+    figs = []
+    sweeps_doc = {}
+    for t in plan.e7_t_max:
+        res = ground_sweep(p400, plan.e7_percents, t, controllers=E7_CONTROLLERS,
+                           duration=duration, backend=backend, check=True,
+                           progress=progress(f"E7 ground sweep {t:g} N m (runs)",
+                                             len(plan.e7_percents) * 3 * RUNS))
+        pts = _sweep_points(res)
+        words = {"pd_pf better": "better", "pd_p better": "worse", "undecided": "undecided"}
+        for k, pct in enumerate(plan.e7_percents):
+            vs = [words[_better(pts["pd_alpha"][k], pts[c][k], ("eps_xH", "eps_yH"))]
+                  for c in ("pd_p", "pd_pf")]
+            md.append(f"| {t:g} | {pct:g} | {vs[0]} | {vs[1]} |")
+        fname = f"fig_e7_ground_tmax{t:g}.png"
+        plots.sweep_plot(res, ("E_av", "eps_xH", "eps_yH"), out / fname,
+                         f"E7: PD^α, PD-P, PD-P&F over the ground, T_max = {t:g} N m")
+        figs.append(f"![{fname}]({fname})")
+        sweeps_doc[f"tmax{t:g}"] = res.rows()
+    md += [""] + figs + [""]
+    alpha = sweep(p400, "pd_alpha.alpha", plan.e7_alphas, controllers=("pd_alpha",),
+                  duration=duration, backend=backend, check=True,
+                  progress=progress("E7 alpha (runs)", len(plan.e7_alphas) * RUNS))
+    fname = "fig_e7_alpha.png"
+    plots.sweep_plot(alpha, ("E_av", "T_L", "eps_xH", "eps_yH"), out / fname,
+                     "E7: PD^α's indices against α (base case)", x_scale=1.0,
+                     x_label="α (order of the derivative)", log_x=False)
+    md += [f"**Against α** (base case, gains above): ![{fname}]({fname})", ""]
+    doc.update({"ground": sweeps_doc, "alpha": alpha.rows()})
+    return md, doc
+
+
 def _why(v: claims.Verdict) -> str:
     """Why a verdict came out as it did: the comparisons that decided it."""
     if v.status == claims.UNDECIDED:
@@ -609,6 +670,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     e5_md += cma_md
     e8_md, e8_doc = e8_section(p400, plan.e8_percents, plan.e8_spreads, plan.e8_t_max,
                                plan.e8_seeds, backend, progress)
+    e7_md, e7_doc = _e7_section(p400, plan, duration, backend, progress, out)
 
     # Claims --------------------------------------------------------------------------
     sweep_pts = {t: _sweep_points(res) for t, res in sweeps.items()}
@@ -627,7 +689,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                   for v in verdicts]
     claims_md += ["", "The numbers behind each verdict: `results.json` (`claims[].evidence`)."]
     claims_md += [""] + [_why(v) for v in verdicts if v.status != claims.HOLDS] + [""]
-    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md + e8_md
+    md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md + e7_md + e8_md
     (out / "README.md").write_text("\n".join(md) + "\n")
 
     def conv_doc(cv: Convergence) -> dict[str, object]:
@@ -651,7 +713,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
            "pd_p_kp1": {"values": list(plan.kp1_values),
                         "scores": [None if math.isnan(s) else s for s in kp1.scores],
                         "best": kp1.best["kp1"]},
-           "tuning_cmaes": cma_doc, "e8": e8_doc}
+           "tuning_cmaes": cma_doc, "e7": e7_doc, "e8": e8_doc}
     (out / "results.json").write_text(json.dumps(doc, indent=2, default=float))
     return verdicts
 
