@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import pytest
+import numpy as np
 
 from hexapod_bringup.graph_launcher import EXIT_CODES
 
@@ -28,7 +29,8 @@ FAST = ("--set", "sim.dt=0.0001", "--control-rate", "1000")
 class Script:
     """scripts/run_graph.sh running in its own session, output in files."""
 
-    def __init__(self, tmp: Path, *args: str, bag: Path | None = None) -> None:
+    def __init__(self, tmp: Path, *args: str, bag: Path | None = None,
+                 fast: bool = True) -> None:
         self.domain = next_domain_id()
         self.bag = bag or tmp / "bag"
         self.logs = Path(f"{self.bag}_logs")
@@ -38,7 +40,8 @@ class Script:
                "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
         with self.out.open("w") as out, self.err.open("w") as err:
             self.proc = subprocess.Popen(
-                [str(ROOT / "scripts" / "run_graph.sh"), "--bag", str(self.bag), *FAST, *args],
+                [str(ROOT / "scripts" / "run_graph.sh"), "--bag", str(self.bag),
+                 *(FAST if fast else ()), *args],
                 stdout=out, stderr=err, env=env, start_new_session=True)
 
     def log(self, name: str) -> str:
@@ -128,6 +131,32 @@ def test_default_scenario_exits_0_with_both_controllers_segments(script):
     assert [r.split()[0] for r in rows] == ["pd_pf", "pd_p"], s.stdout()
     assert "0 missed" in s.stdout() and f"bag: {s.bag}" in s.stdout()
     assert (s.bag / "indices.json").exists()
+
+
+def test_the_default_graph_records_the_default_simulate_motion(tmp_path):
+    # One default scenario (the params file's): `scripts/run_graph.sh --no-switch
+    # --duration 3` records the joint motion of `hexapod simulate --controller pd_pf
+    # --duration 3` (its own numbers, the engine's run), every tick, to 1e-9 rad.
+    from hexapod_control.core.closed_loop import run
+    from hexapod_common.core import topics as T
+    from hexapod_common.core.params import load_params
+    from hexapod_metrics.bag import open_bag, read_joint_state_arrays
+
+    s = Script(tmp_path, "--no-switch", "--duration", "3", fast=False)
+    try:
+        assert s.wait(600) == 0, s.stderr()
+    finally:
+        s.kill_all()
+    assert "control at 10 kHz" in s.stdout(), s.stdout()
+    ref = run(load_params(), "pd_pf", 3.0)
+    with open_bag(s.bag) as b:
+        js = read_joint_state_arrays(b, T.JOINT_STATES)
+    n = ref.obs.shape[0]
+    assert np.array_equal(js.stamps, np.arange(n) * 100_000)
+    from hexapod_common.core.layout import O_TH
+
+    recorded = js.position.reshape(-1, 6, 2)
+    assert np.abs(recorded - ref.obs[:, O_TH]).max() <= 1e-9
 
 
 def test_killed_controller_exits_3_and_fallback_cycles_are_not_the_controllers(script):
