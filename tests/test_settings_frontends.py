@@ -204,6 +204,11 @@ GRAPH_ONLY = [
     (["--rt-priority=abc"], "argument --rt-priority: 'abc' is not a SCHED_FIFO priority"),
     (["--rt-priority", "1.5"], "argument --rt-priority: '1.5' is not a SCHED_FIFO priority "
      "(an integer in [0, 98])"),
+    (["--ground-seed", "-1"], "argument --ground-seed: '-1' is not a seed"),
+    (["--ground-seed", "1.5"], "argument --ground-seed: '1.5' is not a seed"),
+    (["--ground-spread", "500"], "argument --ground-spread: '500' is not a spread in % "
+     "(0 to 200)"),
+    (["--ground-spread", "nan"], "argument --ground-spread: 'nan' is not a spread"),
 ]
 
 

@@ -177,3 +177,37 @@ def test_a_plugin_law_on_the_graph_equals_the_engine(make_graph, tmp_path):
         cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
         assert cmd.names == T.JOINT_NAMES  # torque-only: the 12-entry form
         np.testing.assert_array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)
+
+
+def test_a_monte_carlo_seed_replays_bit_for_bit_in_the_graph(make_graph, tmp_path):
+    # The sim node's ground_seed / ground_spread draw the factors `hexapod montecarlo
+    # --first-seed K` uses: the lockstep graph run equals the engine's run of that seed.
+    from hexapod_bringup.core.montecarlo import simulate_on_ground
+    from hexapod_metrics.bag import read_joint_state_topics
+
+    bag = tmp_path / "bag"
+    duration, seed, spread = 1.0, 7, 0.3
+    g = make_graph()
+    g.start("metrics", f"bag_path:={bag}")
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
+            f"ground_seed:={seed}", f"ground_spread:={spread}", "summary_path:="
+            f"{tmp_path / 'summary.json'}",
+            "wait_for:=trajectory_generator,pd_pf_controller,metrics")
+    summary = finish_recorded_run(g, 300)
+    assert summary["missed"] == 0
+    p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD})
+    ref = simulate_on_ground(p, "pd_pf", seed, spread, duration)
+    n = ref.run.obs.shape[0]
+    with open_bag(bag) as b:
+        cols = read_joint_state_topics(b, list(T.STATE_TOPICS))
+        obs = T.obs_from_columns({t: (a.position, a.velocity, a.effort)
+                                  for t, a in cols.items()})
+    assert obs.shape[0] == n
+    np.testing.assert_array_equal(obs, ref.run.obs)
+    uniform = run(p, "pd_pf", duration)
+    assert np.abs(obs - uniform.obs).max() > 1e-6  # the ground was uneven
+    used = json.loads((tmp_path / "summary.json").read_text())["ground"]
+    assert used["seed"] == seed and used["touchdowns"] == list(ref.run.ground.touchdowns)
+    assert not used["overflowed"]

@@ -41,6 +41,7 @@ import yaml
 from hexapod_control.core.waits import parse as parse_waits
 from hexapod_common.core.errors import HexapodError
 from hexapod_common.core.controller_names import node_of
+from hexapod_sim.core.uneven_ground import check_seed, check_spread
 from hexapod_common.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
 from hexapod_common.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                         default_params_path, load_params, read_params_file)
@@ -136,6 +137,13 @@ def build_parser(prog: str = "run_graph") -> argparse.ArgumentParser:
                    "params file's (10 kHz) in lockstep, the same as `hexapod simulate`; "
                    f"{REALTIME_RATE_HZ:g} with PD-P&F's force loop in the drive in realtime "
                    "mode)")
+    p.add_argument("--ground-seed", dest="ground_seed", type=_seed, metavar="K",
+                   help="uneven ground: every foot's factors per touchdown from seed K, as "
+                   "`hexapod montecarlo --seeds 1 --first-seed K` (replays it bit for bit in "
+                   "lockstep)")
+    p.add_argument("--ground-spread", dest="ground_spread", type=_spread, default=0.0,
+                   metavar="PCT", help="uneven ground: spread in %% (sigma of ln factor x "
+                   "100, as montecarlo's --spread; default 0)")
     p.add_argument("--params", help="ROS 2 params file (default: the shipped base experiment)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override any parameter by its dotted name (repeatable)")
@@ -197,6 +205,23 @@ def port(text: str) -> int:
     if not text.isdigit() or int(text) > 65535:
         raise argparse.ArgumentTypeError(f"{text!r} is not a port number in [0, 65535]")
     return int(text)
+
+
+def _seed(text: str) -> int:
+    """argparse type of ``--ground-seed``: a whole number in [0, 2^53)."""
+    try:
+        return check_seed(int(text), "--ground-seed")
+    except (ValueError, HexapodError) as err:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a seed (a whole number in "
+                                         f"[0, 2^53))") from err
+
+
+def _spread(text: str) -> float:
+    """argparse type of ``--ground-spread``: percent, 0..200 (sigma of ln factor x 100)."""
+    try:
+        return 100.0 * check_spread(float(text) / 100.0, "--ground-spread")
+    except (ValueError, HexapodError) as err:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a spread in % (0 to 200)") from err
 
 
 def _duration(text: str) -> float:
@@ -275,6 +300,9 @@ class Launcher:
         """The sim's own parameters: stop, scripted switch, summary file."""
         a = self.args
         extra = [f"summary_path:={self.summary_file}"]
+        if a.ground_seed is not None:
+            extra += [f"ground_seed:={a.ground_seed}",
+                      f"ground_spread:={a.ground_spread / 100.0!r}"]
         markers = a.markers or a.foxglove is not None
         if markers or a.no_builtin or a.controller not in CONTROLLERS:
             # tick 0 waits for the markers node too, so the markers cover the run from t = 0
@@ -299,6 +327,8 @@ class Launcher:
         if not a.no_switch and (a.duration > 0 or a.switch_at is not None) and switch_to:
             at = a.switch_at if a.switch_at is not None else a.duration / 2
             d += f", {switch_to} from t = {at:g} s"
+        if a.ground_seed is not None:
+            d += f", uneven ground seed {a.ground_seed} spread {a.ground_spread:g} %"
         return d + (f", {a.duration:g} s" if a.duration > 0 else ", until Ctrl-C")
 
     def scheduling(self) -> int:

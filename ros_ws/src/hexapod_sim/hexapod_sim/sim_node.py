@@ -39,6 +39,7 @@ from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
 from hexapod_common.core.switch_channel import ChannelError, SwitchServer
 from hexapod_common.core import trace as _trace
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
+from .core.uneven_ground import GroundDraws, pairs_for
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_common.runtime import inputs_matched
 from hexapod_common.runtime.input_guard import InputGuard
@@ -136,6 +137,7 @@ class SimNode(Node):
             raise ParameterError("switch_at", self.switch_at,
                                  f"a time in [0, run.duration = {end:g}] s")
         self.summary_path = declare_node_param(self, "summary_path")
+        self.ground = self._uneven_ground()
         # SCHED_FIFO for the control path when asked (the launcher does in realtime mode).
         self.rt = use_rt_priority(self, self.log)
         p = self.params
@@ -144,7 +146,7 @@ class SimNode(Node):
         self.period_ns = int(round(self.period * 1e9))
         self._warm_up()
         # The tick rules (lockstep/realtime, misses, hold, fallback, switch): core/tick_machine.py
-        self.ticks = TickMachine(Physics(p), lambda: self.params, self.later, self,
+        self.ticks = TickMachine(Physics(p, self.ground), lambda: self.params, self.later, self,
                                  stop_at_end=self.stop_at_end)
 
         self.loop = HotLoop(self)
@@ -191,6 +193,21 @@ class SimNode(Node):
     def params(self) -> HexapodParams:
         """The node's current (validated) parameters."""
         return self.binding.params
+
+    def _uneven_ground(self) -> GroundDraws | None:
+        """The node parameters ground_seed / ground_spread as draws (None: uniform ground):
+        the factors `hexapod montecarlo --first-seed K` uses, so seed K replays here bit for
+        bit (enough pairs per foot for the run: uneven_ground.pairs_for)."""
+        seed = declare_node_param(self, "ground_seed")
+        spread = declare_node_param(self, "ground_spread")
+        if seed < 0:
+            return None
+        p = self.params
+        span = p.run.duration if self.stop_at_end else 3600.0
+        pairs = 2 * pairs_for(span, p.cycle_time)
+        self.log.info(f"uneven ground: seed {seed}, spread {spread:g} (sigma of ln factor), "
+                      f"{pairs} touchdowns per foot drawn")
+        return GroundDraws.draw(seed, spread, pairs)
 
     def _warm_up(self) -> None:
         """Run the compiled functions once so tick 0 does not pay for loading them."""
@@ -721,6 +738,9 @@ class SimNode(Node):
         doc = self.ticks.summary_doc() | {
             "dropped": {f"{t} ({c})": n for (t, c), n in g.drops.counts.items()},
             "outside_publishers": {t: sorted(n) for t, n in g.outsiders.items()}}
+        record = self.ticks.physics.ground_record()
+        if record is not None:  # seed, spread, touchdowns and the factors the feet used
+            doc["ground"] = record.as_dict() | {"overflowed": record.overflowed}
         tmp = f"{self.summary_path}.tmp"
         with open(tmp, "w") as f:
             json.dump(doc, f)
@@ -739,6 +759,12 @@ def _finish(node: SimNode, code: int) -> int:
     node.run_after_send()  # what the last tick boundary had to say
     if node.ticks.started:
         node.log.info(node.summary())
+        record = node.ticks.physics.ground_record()
+        if record is not None:
+            node.log.info(f"uneven ground: seed {record.draws.seed}, touchdowns per foot "
+                          f"{list(record.touchdowns)}"
+                          + (f"; MORE than the {record.draws.pairs} drawn: the last factors "
+                             "were reused" if record.overflowed else ""))
         node._publish_status()
     try:
         node.write_summary()

@@ -674,6 +674,11 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
                            choices=("",) + CONTROLLERS),
         "summary_path": _node(str, "", "write the end summary as JSON to this file ('' = no)"),
         "rt_priority": _RT,
+        "ground_seed": _node(int, -1, "uneven ground: the seed of every foot's factors per "
+                             "touchdown, as `hexapod montecarlo --first-seed` (-1 = uniform "
+                             "ground)", -1, 2**53 - 1),
+        "ground_spread": _node(float, 0.0, "uneven ground: sigma of ln(factor) (0.2 = "
+                               "`hexapod montecarlo --spread 20`)", 0.0, 2.0),
     },
     "trajectory_generator": {
         "lookahead": _node(int, 50, "ticks published ahead of the newest state", 0, 1000),

@@ -14,6 +14,7 @@ from hexapod_common.core.layout import OBS_SHAPE, model_vector
 from hexapod_common.core.params import N_LEGS, HexapodParams
 
 from .drive import drive_advance
+from .uneven_ground import GroundDraws, GroundRecord, touchdowns
 from .engine import (MAX_COORD, advance_prepared, initial_state, observe_prepared, prepare,
                      scratch, solve)
 
@@ -27,10 +28,12 @@ class Physics:
     computed at the same state (same numbers, bit for bit, as recomputing it).
     """
 
-    def __init__(self, p: HexapodParams) -> None:
+    def __init__(self, p: HexapodParams, ground: GroundDraws | None = None) -> None:
+        """``ground``: uneven ground (uneven_ground.py), its draws in the state's tail."""
         self.params = p
         self.P = model_vector(p)
-        self.state = initial_state(p)
+        self.state = initial_state(p) if ground is None else ground.attach(initial_state(p))
+        self.ground = ground
         self.torque = np.zeros((N_LEGS, 2))
         self.substeps = p.substeps
         self.tick = 0
@@ -67,6 +70,12 @@ class Physics:
             raise DivergenceError(f"state diverged between t = {self.time:.4f} s and the next "
                                   f"tick (non-finite or beyond {MAX_COORD:g})")
         self.tick += 1
+
+    def ground_record(self) -> GroundRecord | None:
+        """The uneven ground used so far (None on uniform ground)."""
+        if self.ground is None:
+            return None
+        return GroundRecord(self.ground, tuple(int(c) for c in touchdowns(self.state)))
 
     def advance_drive(self, cmd: np.ndarray) -> None:
         """Integrate one control period with the drive holding ``cmd`` (6, 6, 2) (rows
