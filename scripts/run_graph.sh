@@ -4,19 +4,26 @@
 # graph (sim and recorder), the indices of each controller segment (a note under a row whose
 # cycle spans or follows a live parameter change) and the bag's path.
 #
-# Default scenario: PD-P&F in charge, handing over to PD-P halfway, base ground, lockstep,
-# 6 simulated seconds (3 gait cycles per controller).
+# Default scenario: the params file's (10 kHz control, the one `hexapod simulate` runs),
+# PD-P&F in charge, handing over to PD-P halfway, base ground, lockstep, 6 simulated seconds
+# (3 gait cycles per controller).
 #
 # Usage: scripts/run_graph.sh [options]      (--opt value and --opt=value both work)
-#   --controller pd_p|pd_pf  controller in charge at the start (default pd_pf)
+#   --controller NAME        controller in charge at the start (default pd_pf; a plug-in
+#                            such as pd_alpha gets its node; another name waits for a
+#                            node that joins)
 #   --switch-to pd_p|pd_pf   controller to hand over to (default: the other one)
 #   --switch-at SECONDS      simulated time of the hand-over (default: half the duration)
 #   --no-switch              keep the first controller all along
 #   --mode lockstep|realtime graph mode (default lockstep)
 #   --duration SECONDS       simulated duration (default 6); 0 = until Ctrl-C
 #   --ground-scale X         factor on the four ground parameters (1.0 = 100 %)
+#   --ground-seed K          uneven ground of Monte Carlo seed K (hexapod montecarlo)
+#   --ground-spread PCT      its spread in % (sigma of ln factor x 100; default 0)
 #   --t-max N_M              actuator saturation T_max (.inf = ideal actuators)
-#   --control-rate HZ        control rate (sim.control_period = 1/HZ)
+#   --control-rate HZ        control rate (sim.control_period = 1/HZ; default the params
+#                            file's 10 kHz; realtime mode: 1 kHz, PD-P&F's force loop in
+#                            the drive)
 #   --params FILE            ROS 2 params file (default: the shipped base experiment)
 #   --set NAME=VALUE         override any parameter by its dotted name (repeatable)
 #   --bag DIR                bag directory (default bags/<YYYYmmdd-HHMMSS>); node logs
