@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import stat
+import time
 
 import numpy as np
 import pytest
@@ -173,7 +174,11 @@ def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
     from hexapod_common.core.switch_channel import (ChannelError, SwitchServer, request,
                                                     runtime_dir)
 
-    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    import tempfile
+
+    # a short directory: a UNIX socket's path has at most 107 bytes (tmp_path may be longer)
+    short = tempfile.mkdtemp(prefix="hx")
+    monkeypatch.setenv("XDG_RUNTIME_DIR", short)
     assert request("switch pd_p", 99, 1.0) is None  # no sim listens: the ROS path is used
     server = SwitchServer.open(99)
     assert stat.S_IMODE(runtime_dir().stat().st_mode) == 0o700
@@ -183,8 +188,11 @@ def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
     client = threading.Thread(target=lambda: answers.append(request("switch pd_p", 99, 5.0)))
     client.start()
     got: list[tuple[str, str]] = []
-    while not got:
+    end = time.monotonic() + 10
+    while not got and time.monotonic() < end:
         got = server.poll()
+        time.sleep(0.001)
+    assert got, answers  # the client's request came (else its error is in answers)
     assert got[0][0] == "switch pd_p"
     server.reply(got[0][1], "ok switching pd_pf -> pd_p at the next tick")
     client.join(5)
@@ -198,6 +206,9 @@ def test_switch_channel_round_trip_and_unsafe_directory(tmp_path, monkeypatch):
     runtime_dir().chmod(0o755)
     with pytest.raises(ChannelError, match="mode 0700"):
         SwitchServer.open(99)
+    import shutil
+
+    shutil.rmtree(short, ignore_errors=True)
 
 
 class _Lines:

@@ -24,8 +24,10 @@ rclpy = pytest.importorskip("rclpy", reason="the graph tests need rclpy (scripts
 _counter = itertools.count()
 #: Graph tests check behaviour (ticks, switches, recording, failures), not the paper's
 #: numbers: they run at model.md's original 1e-4 s physics and 1 kHz control unless a test
-#: overrides these (later overrides win), which keeps lockstep runs and bags small.
-FAST_TIMING = ("sim.dt:=0.0001", "sim.control_period:=0.001")
+#: overrides these (later overrides win), which keeps lockstep runs and bags small. The
+#: lockstep wait for a command is 5 s, not 0.5: the suite runs graphs side by side on two
+#: workers, where a node can stall past 0.5 s; a test of the timeout sets its own.
+FAST_TIMING = ("sim.dt:=0.0001", "sim.control_period:=0.001", "sim.lockstep_timeout:=5.0")
 #: Everything but the recorder stops first, so that the recorder gets their last messages.
 STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
               "metrics")
@@ -39,8 +41,14 @@ def fast_params(**overrides: Any) -> Any:
 
 
 def next_domain_id() -> int:
-    """A ROS_DOMAIN_ID in 1..101 unlikely to be used by a concurrent test session."""
-    return (os.getpid() * 13 + next(_counter) * 7) % 101 + 1
+    """A ROS_DOMAIN_ID in 1..100 unlikely to be used by a concurrent test session, and never
+    by another worker of this one (pytest-xdist: worker w of n takes the ids = w + 1 mod n)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:]
+    w = int(worker) if worker.isdigit() else 0
+    n = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    session = os.getppid() if n > 1 else os.getpid()  # the workers' common parent
+    slot = (session * 13 + next(_counter) * 7) % (100 // n)
+    return 1 + slot * n + w
 
 
 def _graphs(tmp: Path) -> Iterator[Callable[..., GraphProcesses]]:

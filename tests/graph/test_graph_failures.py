@@ -125,6 +125,7 @@ def test_a_ros_tool_started_after_a_sigkill_reaches_the_graph(make_graph):
     assert g.stop("hexapod_sim") == 0
 
 
+@pytest.mark.realtime
 def test_a_controller_says_which_input_it_waited_for_and_what_it_gave_up(make_graph):
     """No trajectory generator: every state of the controller in charge waits for its
     reference. The controller says so in a warning (not for tick 0 alone, which always

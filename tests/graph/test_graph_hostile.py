@@ -182,7 +182,8 @@ def _status_values(rec: dict, node: str) -> dict[str, str]:
 
 @pytest.mark.parametrize("mode, period, duration", [
     ("lockstep", 0.001, 3.0),
-    ("realtime", 0.004, 4.0),  # 250 Hz: see test_graph_switch.py for the rate
+    pytest.param("realtime", 0.004, 4.0, marks=pytest.mark.realtime),  # 250 Hz: see
+    # test_graph_switch.py for the rate
 ])
 def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
         make_graph, tmp_path, mode, period, duration):
@@ -222,7 +223,7 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
 
 @pytest.mark.parametrize("mode, period, duration", [
     ("lockstep", 0.001, 3.0),
-    ("realtime", 0.004, 4.0),
+    pytest.param("realtime", 0.004, 4.0, marks=pytest.mark.realtime),
 ])
 def test_rogue_node_is_not_at_the_controls_and_is_reported(make_graph, tmp_path, mode, period,
                                                            duration):

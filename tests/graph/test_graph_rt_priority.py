@@ -36,6 +36,7 @@ def _others(pid: int) -> list[int]:
             if int(t) not in path]
 
 
+@pytest.mark.realtime
 @pytest.mark.skipif(not realtime_permitted(PRIORITY), reason="SCHED_FIFO not permitted here")
 def test_realtime_graph_runs_its_control_path_under_sched_fifo(make_graph, tmp_path):
     g = make_graph(overrides=("sim.mode:=realtime",), rt_priority=PRIORITY)
