@@ -69,3 +69,20 @@ def test_hostile_cmaes_options_are_one_line(args, words):
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 2 and out.stdout == ""
     assert len(out.stderr.strip().splitlines()) == 1 and words in out.stderr
+
+
+def test_cmaes_searches_pd_alphas_order_inside_its_range():
+    """For PD^alpha the default search includes alpha, on a logistic scale: x = 0 is the
+    params file's alpha, every point stays inside (0, 2), and a run is scored as any."""
+    from hexapod_bringup.core.cmaes import _logistic, default_names
+
+    p = load_params(**{"sim.control_period": 1e-3})
+    assert default_names(p, "pd_alpha") == ("kp1", "kd1", "kp2", "kd2", "alpha")
+    assert default_names(p, "pd_p") == ("kp1", "kd1", "kp2", "kd2")
+    assert _logistic(1.0, (0.0, 2.0), 0.0) == pytest.approx(1.0, abs=1e-15)
+    assert 0.0 < _logistic(1.0, (0.0, 2.0), -50.0) < _logistic(1.0, (0.0, 2.0), 50.0) <= 2.0
+    res = tune_cmaes(p, "pd_alpha", names=("kp1", "alpha"), budget=6, sigma0=1.5, seed=3,
+                     popsize=3, duration=1.0, backend=InlineBackend())
+    assert res.evaluations == 6 and 0.0 < res.best["alpha"] < 2.0
+    alphas = [_logistic(1.0, (0.0, 2.0), float(x[1])) for x in res.search.xs]
+    assert all(0.0 < a < 2.0 for a in alphas) and len(set(alphas)) > 1

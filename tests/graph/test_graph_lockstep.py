@@ -148,24 +148,32 @@ def test_pd_pf_with_its_force_loop_in_the_drive_equals_the_engine_over_the_wire(
     assert list(msg.name) == list(T.DRIVE_COMMAND_NAMES) and len(msg.effort) == 24
 
 
-def test_a_plugin_law_on_the_graph_equals_the_engine(make_graph, tmp_path):
-    # pd_alpha (a plain-Python plug-in, hexapod_control.core.pd_alpha) runs in the generic
-    # controller node (named as the controller), the law called per tick exactly as the
-    # engine's closed loop calls it: the lockstep run equals `run(p, "pd_alpha")`.
+@pytest.mark.parametrize("controller", ["pd_p", "pd_alpha"])
+def test_every_registered_controller_on_the_graph_equals_the_engine(make_graph, tmp_path,
+                                                                   controller):
+    # pd_p in its built-in node; pd_alpha (a plain-Python plug-in,
+    # hexapod_control.core.pd_alpha) in the generic controller node, named as the
+    # controller, its law called per tick exactly as the engine's closed loop calls it. (pd_pf
+    # and its drive mode: the tests above.) In charge from tick 0, the lockstep run equals
+    # `run(p, controller)` bit for bit.
+    from hexapod_common.core.controller_names import node_of
+
     bag = tmp_path / "bag"
     duration = 0.5
+    node = node_of(controller)
     g = make_graph()
     g.start("metrics", f"bag_path:={bag}")
     g.start("trajectory_generator")
-    g.start("pd_alpha")
+    g.start(node)
     g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
-            "run.controller:=pd_alpha", "wait_for:=trajectory_generator,pd_alpha,metrics")
+            f"run.controller:={controller}", f"wait_for:=trajectory_generator,{node},metrics")
     summary = finish_recorded_run(g, 300)
     assert summary["missed"] == 0 and summary["late"] == 0
-    assert "configured: PdAlphaParams(" in g.log("pd_alpha")
+    if controller == "pd_alpha":
+        assert "configured: PdAlphaParams(" in g.log(node)
 
     p = load_params(**{"sim.dt": 1e-4, "sim.control_period": PERIOD})
-    ref = run(p, "pd_alpha", duration)
+    ref = run(p, controller, duration)
     n = ref.obs.shape[0]
     with open_bag(bag) as b:
         cols = {}

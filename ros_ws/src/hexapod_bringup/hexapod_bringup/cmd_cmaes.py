@@ -21,8 +21,7 @@ def tune_cmaes_command(args: argparse.Namespace, backend: Any,
                                                                    Callable[[int], None]]]
                        ) -> int:
     """Run CMA-ES for ``args.controller`` and print the best set next to the params file's."""
-    from .core.cmaes import tune_cmaes
-    from .core.experiments import GAIN_NAMES
+    from .core.cmaes import default_names, searchable, tune_cmaes
 
     if not 2 <= args.budget <= MAX_BUDGET:
         raise HexapodError(f"argument --budget: {args.budget} is not a number of runs in "
@@ -33,13 +32,14 @@ def tune_cmaes_command(args: argparse.Namespace, backend: Any,
     if not 0 <= args.seed < 2 ** 32:
         raise HexapodError(f"argument --seed: {args.seed} is not a whole number in "
                            f"[0, 2^32)")
-    names = tuple(n.strip() for n in args.gains.split(","))
-    allowed = GAIN_NAMES + ("kf",)
+    p = params_from_args(args)
+    names = (default_names(p, args.controller) if args.gains is None
+             else tuple(n.strip() for n in args.gains.split(",")))
+    allowed = searchable(p, args.controller)
     for n in names:
         if n not in allowed:
-            raise HexapodError(f"argument --gains: {n!r} is not a gain (one of "
-                               f"{', '.join(allowed)})")
-    p = params_from_args(args)
+            raise HexapodError(f"argument --gains: {n!r} is not a gain of "
+                               f"{args.controller} (one of {', '.join(allowed)})")
     show = not args.no_progress and sys.stdout.isatty()
     try:
         res = tune_cmaes(p, args.controller, names, args.budget, args.sigma0, args.seed,

@@ -264,7 +264,8 @@ COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt,
         _opt("--budget", type=int, default=62,
              help="cmaes: at most this many evaluations (default 62, a tenth of the "
              "default grid's 625 sets)"),
-        _opt("--gains", default="kp1,kd1,kp2,kd2", help="cmaes: the gains searched"),
+        _opt("--gains", default=None, help="cmaes: the gains searched (default "
+             "kp1,kd1,kp2,kd2, and alpha for a controller that has one: pd_alpha)"),
         _opt("--sigma0", type=float, default=0.8,
              help="cmaes: initial step in ln(gain) (default 0.8, about x/÷ 2.2)"),
         _opt("--seed", type=int, default=1, help="cmaes: seed of the search (default 1)"),

@@ -270,6 +270,8 @@ class SimNode(Node):
 
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
         if "run.controller" in names and p.run.controller != self.ticks.in_charge:
+            if p.run.controller not in engine_names():
+                self.controller_params.prepare(p.run.controller)
             self.ticks.request_switch(p.run.controller)
             self.later.info(f"switch to {p.run.controller} requested: takes effect at "
                           f"the next tick boundary")

@@ -123,17 +123,45 @@ class CmaesTuneResult:
         return 1.0 - self.best_score / self.reference_score
 
 
+#: Parameters searched on a logistic scale inside their open range (the order of PD^alpha's
+#: derivative): x = 0 is the params file's value, x -> +-inf the range's ends; the same box
+#: [ln LOW, ln HIGH] as the gains' log factors keeps it within about 5 % of the ends.
+ORDER_RANGES = {"alpha": (0.0, 2.0)}
+
+
+def _logistic(v0: float, bounds: tuple[float, float], x: float) -> float:
+    """The value at search coordinate ``x`` of a parameter worth ``v0`` at x = 0, within
+    ``bounds`` (open)."""
+    lo, hi = bounds
+    u = (v0 - lo) / (hi - lo)
+    return lo + (hi - lo) / (1.0 + math.exp(-(math.log(u / (1.0 - u)) + x)))
+
+
+def searchable(p: HexapodParams, controller: str) -> tuple[str, ...]:
+    """What CMA-ES may search for ``controller``: the four gains, K_f, and the order alpha
+    where the controller has one (PD^alpha)."""
+    extra = tuple(n for n in ORDER_RANGES if hasattr(p.gains(controller), n))
+    return GAIN_NAMES + ("kf",) + extra
+
+
+def default_names(p: HexapodParams, controller: str) -> tuple[str, ...]:
+    """The default search: the four gains, and alpha where the controller has one."""
+    return GAIN_NAMES + tuple(n for n in ORDER_RANGES if hasattr(p.gains(controller), n))
+
+
 def tune_cmaes(p: HexapodParams, controller: str, names: Sequence[str] = GAIN_NAMES,
                budget: int = 62, sigma0: float = 0.8, seed: int = 1,
                popsize: int | None = None, duration: float | None = None,
                backend: Backend | None = None,
                progress: Callable[[int], None] | None = None) -> CmaesTuneResult:
     """E5 by CMA-ES over the gains ``names`` of ``controller`` (log factors of the params
-    file's gains, within [LOW, HIGH] times them), at most ``budget`` evaluations (the
+    file's gains, within [LOW, HIGH] times them; alpha on a logistic scale inside (0, 2):
+    :data:`ORDER_RANGES`), at most ``budget`` evaluations (the
     params file's own set is run once more, for the comparison, outside the budget)."""
+    allowed = searchable(p, controller)
     for n in names:
-        if n not in GAIN_NAMES + ("kf",):
-            raise ValueError(f"unknown gain {n!r}: one of {', '.join(GAIN_NAMES + ('kf',))}")
+        if n not in allowed:
+            raise ValueError(f"unknown gain {n!r}: one of {', '.join(allowed)}")
     if len(set(names)) != len(names) or not names:
         raise ValueError(f"--gains {','.join(names)!r}: each gain once, at least one")
     duration = p.run.duration if duration is None else duration
@@ -143,9 +171,14 @@ def tune_cmaes(p: HexapodParams, controller: str, names: Sequence[str] = GAIN_NA
             raise ValueError(f"{controller}.{n} = {v:g}: CMA-ES searches factors of a "
                              f"positive gain")
     be = backend or InlineBackend()
+    ranges = {n: ORDER_RANGES[n] for n in names if n in ORDER_RANGES}
+    for n, (lo, hi) in ranges.items():
+        if not lo < g0[n] < hi:
+            raise ValueError(f"{controller}.{n} = {g0[n]:g}: must lie in ({lo:g}, {hi:g})")
 
     def gains_of(x: np.ndarray) -> dict[str, float]:
-        return {n: g0[n] * math.exp(float(xj)) for n, xj in zip(names, x)}
+        return {n: (_logistic(g0[n], ranges[n], float(xj)) if n in ranges
+                    else g0[n] * math.exp(float(xj))) for n, xj in zip(names, x)}
 
     def cases(points: Sequence[np.ndarray]) -> list[Case]:
         return [Case(p.with_values(**{f"{controller}.{n}": v for n, v in gains_of(x).items()}),
@@ -168,4 +201,4 @@ def tune_cmaes(p: HexapodParams, controller: str, names: Sequence[str] = GAIN_NA
 
 
 __all__ = ["CmaesTuneResult", "HIGH", "LOW", "REJECTED_SCORE", "SearchResult", "cmaes_search",
-           "score", "tune_cmaes"]
+           "ORDER_RANGES", "default_names", "score", "searchable", "tune_cmaes"]

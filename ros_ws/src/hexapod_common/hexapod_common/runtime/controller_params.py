@@ -18,7 +18,10 @@ from rclpy.parameter import parameter_value_to_python
 
 from ..core.controller_names import node_of
 
-READ_TIMEOUT = 5.0  # wall s a read may take before it is given up (recorded empty)
+#: Wall s a read may take before it is given up (recorded empty). Asynchronous, so it holds
+#: up no tick: generous, as a client made at a switch must first discover the node's
+#: services (seconds on a loaded machine).
+READ_TIMEOUT = 20.0
 
 
 class _Read:
@@ -57,6 +60,11 @@ class ControllerParamsReader:
                 self.node.create_client(GetParameters, f"/{target}/get_parameters"))
             self.loop.refresh()
         return got
+
+    def prepare(self, controller: str) -> None:
+        """Make the service clients for ``controller`` now (at the switch request), so that
+        their discovery runs while the switch waits for its tick boundary."""
+        self._clients(node_of(controller))
 
     def read(self, controller: str, tick: int) -> None:
         """Start reading ``controller``'s parameters for the record of ``tick``."""
