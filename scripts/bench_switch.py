@@ -25,7 +25,7 @@ moment, so a dead idle controller's cost shows against the same run without a ki
 
 Usage: scripts/bench_switch.py [--switches 50] [--every 0.2] [--period 0.001] [--hog]
        [--rt-priority 20] [--via service|tool|channel]
-       [--no-baseline] [--kill-idle S] [--keep DIR]
+       [--no-baseline] [--kill-idle S] [--keep DIR] [--set NAME=VALUE ...]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
 from __future__ import annotations
@@ -158,7 +158,8 @@ def run(args: argparse.Namespace, switches: int, domain: int, log_dir: Path,
     duration = args.every * (switches + 1) if switches else args.duration
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
                        overrides=(f"sim.dt:={args.dt}", f"sim.control_period:={args.period}",
-                                  f"sim.mode:={args.mode}"),
+                                  f"sim.mode:={args.mode}",
+                                  *(f"{s.replace('=', ':=', 1)}" for s in args.set)),
                        rt_priority=args.rt_priority)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
@@ -276,6 +277,8 @@ def main() -> int:
     ap.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
                     help="graph mode (lockstep: compare real-time factors)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the run without switches")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="a parameter for every node, e.g. pd_pf.force_loop=drive")
     ap.add_argument("--keep", type=Path, metavar="DIR",
                     help="keep each run's logs and bag in DIR/run0, DIR/run1 (default: a "
                     "temporary directory, removed)")
