@@ -15,6 +15,7 @@ pose at t = 0, and the indices measure errors against it. It imports nothing of
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -165,9 +166,25 @@ def reach_bounds(p: GaitModel, samples: int = 2001) -> tuple[float, float]:
 
     Parameter validation runs this wherever parameters are read, also in processes that
     never run compiled code (``hexapod analyze`` reading a bag's parameters): so it runs the
-    same kernel interpreted (``py_func``, ~50 ms for 12,006 samples here) instead of loading
-    the compiled one (0.3-0.8 s in a fresh process, measured).
+    same kernel interpreted (``py_func``, ~30-50 ms for 12,006 samples here) instead of
+    loading the compiled one (0.3-0.8 s in a fresh process, measured). The result depends on
+    the gait and robot groups only and is kept per distinct pair: a sweep validates hundreds
+    of parameter sets that differ in ground or gains (half of a 128-point sweep's time went
+    here before, docs/benchmarks.md).
     """
+    return _reach_bounds(p.gait, p.robot, float(p.cycle_time), samples)
+
+
+class _GaitOnly(NamedTuple):
+    gait: Any
+    robot: Any
+    cycle_time: float
+
+
+@lru_cache(maxsize=1024)
+def _reach_bounds(gait: Any, robot: Any, cycle_time: float, samples: int
+                  ) -> tuple[float, float]:
+    p = _GaitOnly(gait, robot, cycle_time)
     t = np.linspace(0.0, p.cycle_time, samples)
     out, _, _ = _reference_arrays(p, t, False, compiled=False)
     hip, foot = out[:, 0], out[:, 2]
