@@ -62,7 +62,8 @@ def test_cmaes_tuner_is_reproducible_backend_independent_and_scores_like_a_run()
 @pytest.mark.parametrize("args, words", [
     (["--budget", "0"], "--budget: 0"), (["--gains", "kp1,kx"], "'kx'"),
     (["--sigma0", "-1"], "--sigma0: -1"), (["--seed", "-4"], "--seed: -4"),
-    (["--budget", "3"], "less than one generation")])
+    (["--budget", "3"], "less than one generation"),
+    (["--gains", "kp1,alpha"], "'alpha' is not a gain of pd_pf")])
 def test_hostile_cmaes_options_are_one_line(args, words):
     out = subprocess.run([sys.executable, "-m", "hexapod_bringup.cli", "tune", "--controller",
                           "pd_pf", "--method", "cmaes", "--backend", "inline", *args],
