@@ -147,3 +147,19 @@ def bag_qos(bag: Path) -> dict[str, str]:
             assert any(want.split("_")[0] in d for d in durability) or (
                 want == "reliable" and any("volatile" in d for d in durability)), (c, want)
     return out
+
+
+def recorded_obs(bag: Any, ticks: int, period_ns: int) -> Any:
+    """The samples (ticks, 9, 6, 2) of an open bag's three state topics, after asserting that
+    each holds exactly ticks 0 .. ticks - 1 (stamps k * period_ns)."""
+    import numpy as np
+
+    from hexapod_common.core import topics as T
+    from hexapod_metrics.bag import read_joint_state_arrays
+
+    cols = {}
+    for topic in T.STATE_TOPICS:
+        a = read_joint_state_arrays(bag, topic)
+        assert np.array_equal(a.stamps, np.arange(ticks) * period_ns), f"{topic}: a tick is missing"
+        cols[topic] = (a.position, a.velocity, a.effort)
+    return T.obs_from_columns(cols)

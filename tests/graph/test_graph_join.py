@@ -26,6 +26,7 @@ from hexapod_common.core import topics as T
 from hexapod_common.runtime import conversions as C
 from hexapod_metrics.bag import open_bag
 
+from .bag_checks import recorded_obs
 from .conftest import hexapod_cli, sim_summary
 from .test_graph_exits import ROOT, Script
 
@@ -338,13 +339,9 @@ def test_joined_pd_law_in_charge_from_tick_0_equals_the_engines_pd_p(make_graph,
     ref = run(fast_params(), "pd_p", duration)
     n = ref.obs.shape[0]
     with open_bag(bag) as b:
-        cols = {}
-        for topic in T.STATE_TOPICS:
-            a = read_joint_state_arrays(b, topic)
-            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
-            cols[topic] = (a.position, a.velocity, a.effort)
+        obs = recorded_obs(b, n, 1_000_000)
         cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
-    assert np.array_equal(T.obs_from_columns(cols), ref.obs)
+    assert np.array_equal(obs, ref.obs)
     assert np.array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)
 
 

@@ -14,7 +14,7 @@ from hexapod_bringup.core.simulate import simulate
 from hexapod_common.core import topics as T
 from hexapod_common.core.params import load_params
 
-from .bag_checks import bag_qos
+from .bag_checks import bag_qos, recorded_obs
 from .conftest import finish_recorded_run, start_recorded_run
 
 DURATION = 3.0
@@ -122,12 +122,7 @@ def test_pd_pf_with_its_force_loop_in_the_drive_equals_the_engine_over_the_wire(
                      duration)
     n = ref.obs.shape[0]
     with open_bag(bag) as b:
-        cols = {}
-        for topic in T.STATE_TOPICS:
-            a = read_joint_state_arrays(b, topic)
-            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
-            cols[topic] = (a.position, a.velocity, a.effort)
-        obs = T.obs_from_columns(cols)
+        obs = recorded_obs(b, n, 1_000_000)
         np.testing.assert_allclose(obs, ref.obs, rtol=0, atol=1e-9)
         assert np.abs(obs - topic_loop.obs).max() > 1e-6  # another controller than topic's
         cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
@@ -176,12 +171,7 @@ def test_every_registered_controller_on_the_graph_equals_the_engine(make_graph, 
     ref = run(p, controller, duration)
     n = ref.obs.shape[0]
     with open_bag(bag) as b:
-        cols = {}
-        for topic in T.STATE_TOPICS:
-            a = read_joint_state_arrays(b, topic)
-            assert np.array_equal(a.stamps, np.arange(n) * 1_000_000), topic
-            cols[topic] = (a.position, a.velocity, a.effort)
-        np.testing.assert_array_equal(T.obs_from_columns(cols), ref.obs)
+        np.testing.assert_array_equal(recorded_obs(b, n, 1_000_000), ref.obs)
         cmd = read_joint_state_arrays(b, T.JOINT_COMMANDS)
         assert cmd.names == T.JOINT_NAMES  # torque-only: the 12-entry form
         np.testing.assert_array_equal(cmd.effort[:n - 1].reshape(-1, 6, 2), ref.command)
