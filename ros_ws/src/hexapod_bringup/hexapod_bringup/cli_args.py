@@ -194,3 +194,13 @@ def parse_value(text: str) -> Any:
 __all__ = ["OneLineParser", "control_rate", "number", "overrides_from_args", "param_value",
            "params_arguments",
            "params_from_args", "parse_range", "parse_value", "read_number", "value_range"]
+
+
+def print_tuning(res: Any) -> None:
+    """The best gain set of a tuning (grid or CMA-ES) next to the params file's, with
+    eps_xH + eps_yH of each and the improvement."""
+    print("best:        " + ", ".join(f"{k}={v:.6g}" for k, v in res.best.items()) +
+          f"  eps_xH+eps_yH = {res.best_score:.5g} m")
+    print("params file: " + ", ".join(f"{k}={v:.6g}" for k, v in res.reference.items()) +
+          f"  eps_xH+eps_yH = {res.reference_score:.5g} m")
+    print(f"the best set beats the params file's gains by {100 * res.improvement:.3g} %")

@@ -10,7 +10,7 @@ from typing import Any, Callable
 
 from hexapod_common.core.errors import HexapodError
 
-from .cli_args import params_from_args
+from .cli_args import params_from_args, print_tuning
 
 #: Largest --budget accepted (runs).
 MAX_BUDGET = 100000
@@ -51,11 +51,7 @@ def tune_cmaes_command(args: argparse.Namespace, backend: Any,
     print(f"{args.controller}: CMA-ES, {res.evaluations} evaluations "
           f"({res.search.generations} generations), {res.rejected} rejected "
           f"(diverged or not walking)")
-    print("best:        " + ", ".join(f"{k}={v:.6g}" for k, v in res.best.items()) +
-          f"  eps_xH+eps_yH = {res.best_score:.5g} m")
-    print("params file: " + ", ".join(f"{k}={v:.6g}" for k, v in res.reference.items()) +
-          f"  eps_xH+eps_yH = {res.reference_score:.5g} m")
-    print(f"the best set beats the params file's gains by {100 * res.improvement:.3g} %")
+    print_tuning(res)
     if args.json:
         Path(args.json).write_text(json.dumps({
             "controller": args.controller, "method": "cmaes", "seed": args.seed,

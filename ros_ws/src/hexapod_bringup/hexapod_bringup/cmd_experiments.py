@@ -14,7 +14,7 @@ import numpy as np
 
 from hexapod_common.core.errors import HexapodError
 
-from .cli_args import params_arguments, params_from_args, parse_range
+from .cli_args import params_arguments, params_from_args, parse_range, print_tuning
 from .cmd_controllers import controller_list, preload
 from hexapod_metrics.core.indices import INDEX_NAMES
 
@@ -193,11 +193,7 @@ def _cmd_tune(args: argparse.Namespace) -> int:
                progress=progress_factory(not args.no_progress)(f"tuning {args.controller}", total))
     print(f"{args.controller}: {len(res.gains)} gain sets, {res.rejected_diverged} diverged, "
           f"{res.rejected_not_walking} not walking (rejected)")
-    print("best:      " + ", ".join(f"{k}={v:.6g}" for k, v in res.best.items()) +
-          f"  eps_xH+eps_yH = {res.best_score:.5g} m")
-    print("params file: " + ", ".join(f"{k}={v:.6g}" for k, v in res.reference.items()) +
-          f"  eps_xH+eps_yH = {res.reference_score:.5g} m")
-    print(f"the best set beats the params file's gains by {100 * res.improvement:.3g} %")
+    print_tuning(res)
     if args.json:
         Path(args.json).write_text(json.dumps({
             "controller": args.controller, "grid": res.grid, "best": res.best,

@@ -37,13 +37,14 @@ from pathlib import Path
 from typing import IO, Any, Callable, Sequence
 
 from hexapod_common.core.errors import HexapodError
-from hexapod_common.core.controller_names import check_name, engine_names, name_of, node_of
+from hexapod_common.core.controller_names import engine_names, name_of, node_of
 from hexapod_common.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
                                                 PortFence, domain_id_from_env, shm_locks,
                                                 private_profile, remove_dead_shm,
                                                 unused_participant_id)
 from hexapod_common.runtime.lifeline import PARENT_ENV
 
+from .join_options import controller_arg
 from .cli_args import OneLineParser, number
 
 #: node name -> (module, entry point)
@@ -377,13 +378,6 @@ def _is_lifecycle(node: Any, controller: str, timeout: float) -> bool:
     return False
 
 
-def controller_name(text: str) -> str:
-    """argparse type of a controller name (core/controller_names.py)."""
-    try:
-        return check_name(text, "controller")
-    except HexapodError as err:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a controller name ({err})") from err
-
 
 def switch(controller: str, timeout: float = 10.0) -> str:
     """Hand control to ``controller`` (see module docstring); the line to print.
@@ -524,7 +518,7 @@ def _cmd_status(args: argparse.Namespace) -> int:
 def add_parser(subparsers: Any) -> None:
     """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
     sp = subparsers.add_parser("switch", help="hand control to another controller node")
-    sp.add_argument("controller", type=controller_name,
+    sp.add_argument("controller", type=controller_arg,
                     help="a controller on the graph: pd_p, pd_pf or a node that joined "
                          "(docs/controllers.md)")
     sp.add_argument("--timeout", type=TIMEOUT, default=10.0,
