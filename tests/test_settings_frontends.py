@@ -107,6 +107,10 @@ PARAMS_FILES = [  # (file content, text the one line must hold)
     (BASE.replace("foot_clearance: 0.2", "foot_clearance: 1.8"),
      "parameter 'gait.foot_clearance' = 1.8 is invalid"),
     # the nodes' own parameters: their table (params.NODE_PARAMS) holds type and range
+    ("hexapod_sim:\n  ros__parameters:\n    ground_seed: -5\n",
+     "node 'hexapod_sim': parameter 'ground_seed' = -5 is invalid"),
+    ("hexapod_sim:\n  ros__parameters:\n    ground_spread: 3.5\n",
+     "node 'hexapod_sim': parameter 'ground_spread' = 3.5 is invalid"),
     ("markers:\n  ros__parameters:\n    rate: 0\n",
      "node 'markers': parameter 'rate' = 0.0 is invalid: allowed float in (0, 1e+06]"),
     ("markers:\n  ros__parameters:\n    deliver_to: 5\n",
