@@ -57,7 +57,7 @@ from hexapod_common.runtime.input_guard import InputGuard
 from hexapod_common.runtime.node_main import run_node
 from hexapod_common.runtime.param_topic import ParamAnnouncer
 from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from hexapod_common.runtime.rt_sched import use_rt_priority
+from hexapod_common.runtime.rt_sched import refresh_once, use_rt_priority
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
@@ -109,6 +109,7 @@ class ControllerNode(LifecycleNode):
         # below (the design until 2026-12) it was starved on a loaded machine and lost the
         # ticks after a switch to it more often (docs/benchmarks.md, sixth stop).
         self.rt = use_rt_priority(self, self.log)
+        self.rt_refreshed = False
         # Every lifecycle transition (ours or a ROS tool's) is logged and sent at once on
         # /hexapod/status, so the bag records it with the sim time it happened at.
         self.lifecycle = "unconfigured"
@@ -353,6 +354,8 @@ class ControllerNode(LifecycleNode):
                                     advance=True)
         if js is None:
             return
+        if not self.rt_refreshed:  # every peer matched by now: late receive threads too
+            refresh_once(self)
         stamp = js.stamp_ns
         self.input_floor = min(self.pending, default=stamp)
         mine = in_charge(js.frame_id) == self.arch and self.active

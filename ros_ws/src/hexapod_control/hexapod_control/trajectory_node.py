@@ -31,7 +31,7 @@ from hexapod_common.runtime.input_guard import InputGuard
 from hexapod_common.runtime.node_main import run_node
 from hexapod_common.runtime.param_topic import ParamAnnouncer
 from hexapod_common.runtime.ros_params import ParamBinding, declare_node_param, declare_params
-from hexapod_common.runtime.rt_sched import use_rt_priority
+from hexapod_common.runtime.rt_sched import refresh_once, use_rt_priority
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -62,6 +62,7 @@ class TrajectoryNode(Node):
         # normal scheduling on a machine the 1 kHz graph keeps busy, it ran every 0.2-1.3 s
         # and the controller waited for its reference at almost every tick).
         self.rt = use_rt_priority(self, self.log)
+        self.rt_refreshed = False
         p = self.binding.params
         self.period = p.sim.control_period
         self.period_ns = int(round(self.period * 1e9))
@@ -112,6 +113,8 @@ class TrajectoryNode(Node):
                                      advance=True)
         if got is None:
             return False
+        if not self.rt_refreshed:  # every peer matched by now: late receive threads too
+            refresh_once(self)
         k = C.tick_of(got.stamp_ns, self.period_ns)
         if k < self.next_tick - self.lookahead - 1:  # the clock went back: a new run
             self.log.info(f"clock went back to tick {k}: restarting the references")

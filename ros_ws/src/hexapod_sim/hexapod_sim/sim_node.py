@@ -405,6 +405,10 @@ class SimNode(Node):
             + (" (stops there)" if self.stop_at_end else " (runs until stopped)"))
         if self.ticks.in_charge not in engine_names():
             self.controller_params.read(self.ticks.in_charge, 0)
+        if self.rt is not None:  # every peer matched: receive threads made meanwhile too
+            late = self.rt.refresh()
+            if late:
+                self.log.info(f"rt_priority: SCHED_FIFO also for {', '.join(late)}")
         self.ticks.start(time.monotonic())
         self._rtf = (self.ticks.wall_start, 0)
         self._prepare()

@@ -83,8 +83,28 @@ class ControlPath:
     and their SCHED_FIFO priority."""
 
     def __init__(self, main: bool = True) -> None:
+        self.main = main
         self.threads = control_path_threads(main=main)
         self.priority = 0
+
+    def refresh(self) -> list[str]:
+        """Put the control-path threads made since the list was taken (Fast DDS opens a
+        shared-memory receive port, and its thread, when it needs one, e.g. once a peer
+        matched) under the same priority; their names."""
+        if not self.priority:
+            return []
+        known = {tid for tid, _ in self.threads}
+        added = []
+        for tid, name in control_path_threads(main=self.main):
+            if tid in known:
+                continue
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(self.priority))
+            except (ProcessLookupError, PermissionError):  # gone, or no longer permitted
+                continue
+            self.threads.append((tid, name))
+            added.append(name)
+        return added
 
     @property
     def names(self) -> list[str]:
@@ -117,6 +137,17 @@ class ControlPath:
             done.append(tid)
         self.threads = [t for t in self.threads if t[0] not in gone]
         self.priority = priority
+
+
+def refresh_once(node: Any) -> None:
+    """At a node's first tick: :meth:`ControlPath.refresh` of its ``rt`` (if any), once, and
+    say in its log which threads joined (``node.rt``, ``node.log``)."""
+    path = getattr(node, "rt", None)
+    node.rt_refreshed = True
+    if path is not None:
+        late = path.refresh()
+        if late:
+            node.log.info(f"rt_priority: SCHED_FIFO also for {', '.join(late)}")
 
 
 def make_realtime(priority: int, main: bool = True) -> ControlPath:
@@ -160,4 +191,4 @@ def use_rt_priority(node: Any, log: Any, main: bool = True) -> ControlPath | Non
 
 __all__ = ["HOW_TO_PERMIT", "MAX_PRIORITY", "ControlPath", "RealtimeNotPermitted",
            "control_path_threads", "dds_thread",
-           "make_realtime", "realtime_permitted", "use_rt_priority"]
+           "make_realtime", "realtime_permitted", "refresh_once", "use_rt_priority"]
