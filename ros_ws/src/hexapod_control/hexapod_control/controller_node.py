@@ -28,10 +28,13 @@ controller that is not in charge costs one wake-up per tick and is ready to take
 any tick boundary. Every input goes through the guard (``hexapod_common.runtime.input_guard``) and
 every command is signed with the run's key.
 
-A controller that is not in charge still wakes at every state (the first state that names it
-after a switch must find it awake), but takes its queued foot forces and references only
-every ``IDLE_DRAIN`` s, checking only those from the newest state's tick on: at a switch it
-then has at most a few ms of inputs to take in.
+A controller that is not in charge is not woken by the states: it takes its queued states,
+foot forces and references every ``IDLE_DRAIN`` s (checking only the inputs from the newest
+state's tick on), and is woken at once by ``/hexapod/active_controller`` when the sim names
+it (the sim announces a switch right after the switch tick's states, so the state that names
+it is then queued, or comes next and wakes it). An idle controller woken by every state cost
+1.2-1.4 s of CPU per 5 s lockstep run at 1 kHz, the graph's third-largest share
+(docs/benchmarks.md, S4).
 Every state of ours is answered, in order, late rather than never (answering only the
 newest state was tried: at the same share of on-time ticks it left ticks unanswered at
 switches). Every input is authenticated on arrival (a forged or replayed one is dropped
@@ -62,12 +65,14 @@ from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.lifecycle import Node as LifecycleNode
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 
 from hexapod_common.runtime import conversions as C
 from hexapod_common.runtime import inputs_matched
 
+from hexapod_common.core import cdr
 from hexapod_common.core.controller_names import node_of
-from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.errors import CdrError, ParameterError
 from hexapod_common.core.layout import C_KD, C_KF, C_KP, C_TFF, COMMAND_SHAPE, O_HF, O_HP, O_HV
 from hexapod_common.core.params import CONTROLLERS, controller_group
 
@@ -132,6 +137,7 @@ class ControllerNode(LifecycleNode):
         self.subs: dict[str, Any] = {}
         self.active = False
         self.in_charge = False  # named by the newest state
+        self.named = False  # named by the newest /hexapod/active_controller
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
         # Inputs taken while not in charge, authenticated but not decoded yet: stamp -> the
@@ -219,6 +225,9 @@ class ControllerNode(LifecycleNode):
             self.subs[T.JOINT_STATES] = self.loop.subscribe(
                 JointState, T.JOINT_STATES, self._on_state,
                 C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
+            self.subs[T.ACTIVE_CONTROLLER] = self.loop.subscribe(
+                String, T.ACTIVE_CONTROLLER, self._on_active,
+                C.TOPIC_QOS[T.ACTIVE_CONTROLLER].subscriber(1))
         self.active = True
         self.log.info("active: answering the states that name "
                       f"'{self.arch}' as the controller in charge")
@@ -229,9 +238,11 @@ class ControllerNode(LifecycleNode):
         """Stop answering; reference and forces keep filling their buffers."""
         self.active = False
         self.pending.clear()
-        sub = self.subs.pop(T.JOINT_STATES, None)
-        if sub is not None:
-            self.loop.unsubscribe(sub)
+        for topic in (T.JOINT_STATES, T.ACTIVE_CONTROLLER):
+            sub = self.subs.pop(topic, None)
+            if sub is not None:
+                self.loop.unsubscribe(sub)
+        self.named = False
         self.log.info("inactive")
         self._entered("inactive")
         return super().on_deactivate(state)
@@ -265,8 +276,19 @@ class ControllerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _drain(self) -> None:
-        """Not in charge: take the queued references and foot forces, kept unchecked (those
-        of ticks before the newest state are skipped, also among those kept)."""
+        """Not in charge: take the queued states, then the queued references and foot
+        forces, kept unchecked (those of ticks before the newest state are skipped, also
+        among those kept); again in IDLE_DRAIN s while states come, else the next state
+        wakes the loop."""
+        states = self.subs.get(T.JOINT_STATES)
+        if states is not None:
+            took = self.loop.take(states)
+            if self.in_charge:  # a state named us: _on_state answered it
+                return
+            if not took:  # no states flow (the run ended or has not begun): let one wake us
+                self.loop.set_wake(states, True)
+            elif self.loop.deadline is None:
+                self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
         for topic in (T.REFERENCE, T.FOOT_FORCES):
             sub = self.subs.get(topic)
             if sub is not None:
@@ -340,6 +362,23 @@ class ControllerNode(LifecycleNode):
     def _on_forces(self, data: bytes) -> None:
         self._on_input(T.FOOT_FORCES, self.forces, data)
 
+    def _on_active(self, data: bytes) -> None:
+        """``/hexapod/active_controller`` (the sim's, authenticated): named, this controller
+        lets the states wake it again and takes those queued (one may name it already)."""
+        payload = self.guard.payload(T.ACTIVE_CONTROLLER, data)
+        if payload is None:
+            return
+        try:
+            name = cdr.decode_string(payload)
+        except CdrError as err:
+            self.guard.drop(T.ACTIVE_CONTROLLER, M.UNDECODABLE, str(err))
+            return
+        self.named = name == self.arch
+        states = self.subs.get(T.JOINT_STATES)
+        if self.named and states is not None:
+            self.loop.set_wake(states, True)
+            self.loop.take(states)
+
     def _on_state(self, data: bytes) -> None:
         """A state: ours to answer if it names this controller (and we are active).
 
@@ -367,8 +406,11 @@ class ControllerNode(LifecycleNode):
             self._check_unchecked(stamp)  # this tick's, kept while another was in charge
             self.loop.take(self.subs[T.REFERENCE])
             self.loop.take(self.subs[T.FOOT_FORCES])
-        elif self.loop.deadline is None:  # not ours: its inputs can wait a few ms
-            self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
+        else:  # not ours: its inputs, and the next states, can wait a few ms
+            if not self.named:
+                self.loop.set_wake(self.subs[T.JOINT_STATES], False)
+            if self.loop.deadline is None:
+                self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
         if mine:
             self.last_state = stamp
             self.pending[stamp] = js
