@@ -85,6 +85,20 @@ def test_lockstep_applies_each_command_at_once_and_equals_the_engine() -> None:
     assert m.latency_ms(0.5) == pytest.approx(0.12)  # 0.11 ms round trips: bin [0.10, 0.12) ms
 
 
+def test_paced_lockstep_releases_each_tick_a_period_over_max_rtf_after_the_last() -> None:
+    m, _, p = machine()
+    assert m.release_at() == 0.0  # the default: unpaced, each tick goes out at once
+    m, _, p = machine(**{"sim.lockstep_max_rtf": 0.25})
+    m.start(0.0)
+    for k in range(3):
+        sent = 10.0 * k  # a graph slower than the pace is not made to catch up
+        publish(m, sent)
+        assert m.command(m.stamp, "pd_pf", demand(k), sent + 1e-4) is Outcome.SEND
+        assert m.release_at() == pytest.approx(sent + PERIOD / 0.25)
+    with pytest.raises(Exception, match="sim.lockstep_max_rtf"):
+        machine(**{"sim.lockstep_max_rtf": -1.0})
+
+
 def test_missed_tick_holds_the_torque_and_says_so_in_the_next_frame() -> None:
     m, rec, p = machine()
     m.start(0.0)

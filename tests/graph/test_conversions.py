@@ -95,7 +95,8 @@ def test_descriptors_come_from_the_specs():
     assert descriptor("sim.dt", SPECS["sim.dt"]).read_only
     assert descriptor("gait.velocity", SPECS["gait.velocity"]).read_only
     for name in ("ground.k_y", "actuator.t_max", "pd_p.kp1", "pd_pf.kf", "run.controller",
-                 "sim.lockstep_timeout", "sim.hold_time", "sim.fallback_damping"):
+                 "sim.lockstep_timeout", "sim.lockstep_max_rtf", "sim.hold_time",
+                 "sim.fallback_damping"):
         assert is_live(name) and not descriptor(name, SPECS[name]).read_only
     d = descriptor("ground.k_y", SPECS["ground.k_y"])
     assert d.floating_point_range[0].from_value == 0.0

@@ -1,6 +1,8 @@
 """A lockstep graph run records exactly what the in-process closed loop computes."""
 from __future__ import annotations
 
+import re
+
 import json
 from collections import Counter
 from pathlib import Path
@@ -150,20 +152,27 @@ def test_every_registered_controller_on_the_graph_equals_the_engine(make_graph, 
     # hexapod_control.core.pd_alpha) in the generic controller node, named as the
     # controller, its law called per tick exactly as the engine's closed loop calls it. (pd_pf
     # and its drive mode: the tests above.) In charge from tick 0, the lockstep run equals
-    # `run(p, controller)` bit for bit.
+    # `run(p, controller)` bit for bit. The pd_p run is paced (sim.lockstep_max_rtf = 0.5: a
+    # tick goes out no sooner than 2 periods of wall time after the last): same numbers,
+    # at most half real time.
     from hexapod_common.core.controller_names import node_of
 
     bag = tmp_path / "bag"
     duration = 0.5
+    max_rtf = 0.5 if controller == "pd_p" else 0.0
     node = node_of(controller)
     g = make_graph()
     g.start("metrics", f"bag_path:={bag}")
     g.start("trajectory_generator")
     g.start(node)
     g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
-            f"run.controller:={controller}", f"wait_for:=trajectory_generator,{node},metrics")
+            f"run.controller:={controller}", f"wait_for:=trajectory_generator,{node},metrics",
+            f"sim.lockstep_max_rtf:={max_rtf}")
     summary = finish_recorded_run(g, 300)
     assert summary["missed"] == 0 and summary["late"] == 0
+    if max_rtf:
+        rtf = float(re.search(r"real-time factor ([\d.]+)", g.log("hexapod_sim")).group(1))
+        assert 0 < rtf <= max_rtf * 1.005, rtf  # (k - 1) paced gaps over k ticks
     if controller == "pd_alpha":
         assert "configured: PdAlphaParams(" in g.log(node)
 

@@ -502,7 +502,11 @@ class SimNode(Node):
             self.guard.drop(T.JOINT_COMMANDS, M.BAD_STAMP,
                             f"stamp {cmd.stamp_ns * 1e-9:.9g} s is ahead of the current tick")
         elif got is Outcome.SEND:
-            self._send()
+            due = self.ticks.release_at()  # sim.lockstep_max_rtf: not before then
+            if due > time.monotonic():
+                self.loop.set_deadline(due, self._send)
+            else:
+                self._send()
         elif got is Outcome.SCHEDULE:  # realtime: tick 1 goes out now
             self.loop.set_deadline(0.0, self._on_period_end)
 

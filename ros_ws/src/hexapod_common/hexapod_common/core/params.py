@@ -172,6 +172,9 @@ class SimParams:
     mode: str = _s("graph mode", MODES)
     lockstep_timeout: float = _f("lockstep: wall time to wait for a command before a missed "
                                  "tick (s)", 0.0, 60.0, lo_open=True)
+    lockstep_max_rtf: float = _f("lockstep: at most this many sim s per wall s, e.g. 1 to "
+                                 "watch a run at real time (0: as fast as the graph goes)",
+                                 0.0, 1e6)
     hold_time: float = _f("controller silent this long (sim s): hold the last torque, then "
                           "fall back to joint damping", 0.0, 10.0, lo_open=True)
     fallback_damping: float = _f("joint damping of the safe fallback (N m s/rad)", 0.0, 1e6)

@@ -46,7 +46,7 @@ from ..core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams
 
 #: Parameters (or groups, with a trailing '.') that may change while the graph runs.
 LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
-        "sim.hold_time", "sim.fallback_damping")
+        "sim.lockstep_max_rtf", "sim.hold_time", "sim.fallback_damping")
 
 
 #: Model parameters (or groups, with a trailing '.') each node uses and so declares.

@@ -6,7 +6,8 @@ publishes the sample of tick k (:meth:`TickMachine.sample`) between :meth:`sendi
 and every expired wait (:meth:`timeout` in lockstep, :meth:`period_end` in realtime) on.
 Times are wall seconds (``time.monotonic``), stamps integer nanoseconds of simulated time.
 
-* lockstep: tick k+1 is computed as soon as the command of tick k is applied; without it
+* lockstep: tick k+1 is computed as soon as the command of tick k is applied (and sent at
+  once, or, with ``sim.lockstep_max_rtf`` > 0, not before :meth:`release_at`); without it
   within ``sim.lockstep_timeout`` the tick is *missed* and the last torque *held*; while the
   controller is silent, each tick waits one period; after ``sim.hold_time`` of silence the
   torque is the joint-damping *fallback* -sim.fallback_damping * dtheta (saturated). The first
@@ -196,6 +197,13 @@ class TickMachine:
             self.t0 = now - k * self.period
             due = now + self.period
         return Wait.PERIOD_END, due
+
+    def release_at(self) -> float:
+        """Lockstep: the wall time (monotonic s) the next tick may go out, at most
+        ``sim.lockstep_max_rtf`` sim s per wall s counted from the current tick's sending
+        (0.0: at once; a graph slower than that is never made to catch up)."""
+        rtf = self.params().sim.lockstep_max_rtf
+        return self.published_at + self.period / rtf if rtf > 0 else 0.0
 
     # ------------------------------------------------------------------ inputs
     def command(self, stamp_ns: int, controller: str, effort: FloatArray,
