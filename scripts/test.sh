@@ -4,7 +4,8 @@
 # over tests/ and each package's own test/ directory. Extra arguments go to
 # pytest (naming a test path runs only that, serially, without the lint and type
 # checks); the exit code is the first failing step's. The whole suite runs on
-# HEXAPOD_TEST_WORKERS (default 2) pytest-xdist workers, the "realtime" tests after it.
+# HEXAPOD_TEST_WORKERS (default 2) pytest-xdist workers (a module marked xdist_group on one
+# worker, its module-scoped fixture once), the "realtime" tests after it.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
@@ -36,7 +37,7 @@ if (( ${#dirs[@]} )); then
     python -m pytest --rootdir "$root" -q "$@" || rc=$?
     if (( rc != 0 && rc != 5 )); then exit "$rc"; fi
   }
-  phase -n "$workers" -m "not realtime" "${dirs[@]}" "$@"
+  phase -n "$workers" --dist loadgroup -m "not realtime" "${dirs[@]}" "$@"
   phase -m realtime "${dirs[@]}" "$@"
   exit 0
 fi

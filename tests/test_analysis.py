@@ -14,6 +14,10 @@ from hexapod_metrics.core.recording import write_run_bag
 from hexapod_bringup.core.simulate import simulate
 from hexapod_common.core.params import load_params
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_analysis")
+
 #: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 

@@ -16,6 +16,10 @@ from hexapod_common.core import topics as T
 from hexapod_common.core.param_log import ParamRecord, ParamRecordError, timeline
 from hexapod_common.core.params import SPECS, load_params
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_bag_params")
+
 #: analysis behaviour, not the paper's numbers: model.md's 1e-4 s physics, 1 kHz control
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 SLOW = {"gait.velocity": 0.8, **FAST}  # T = 1.25 s: wrong defaults would cut cycles elsewhere

@@ -12,6 +12,10 @@ from hexapod_metrics.core.indices import INDEX_NAMES, Indices
 from hexapod_bringup.core.simulate import Outcome
 from hexapod_common.core.params import load_params
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_convergence")
+
 GROUNDS = (1.0, 3.0, 10.0)
 T_MAX = (400.0, 170.0)
 

@@ -16,6 +16,10 @@ from hexapod_common.core import labels as L
 from hexapod_common.core import topics as T
 from hexapod_common.core.params import load_params
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_cycles")
+
 FAST = {"sim.dt": 1e-4, "sim.control_period": 1e-3}
 
 

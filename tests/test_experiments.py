@@ -12,6 +12,10 @@ from hexapod_bringup.core.simulate import Outcome, simulate
 from hexapod_common.core.layout import O_TQ
 from hexapod_common.core.params import load_params
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_experiments")
+
 PERCENTS = (20.0, 100.0, 500.0)
 
 

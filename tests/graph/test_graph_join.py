@@ -119,11 +119,14 @@ def join_script(tmp_path: Path):
     started: list[Script] = []
     nodes: list[subprocess.Popen[bytes]] = []
 
-    def start(*args: str) -> Script:
+    def start(*args: str, lockstep_timeout: float = 5.0) -> Script:
         # Ten times the default wait for a command: on a shared, loaded machine a Python
         # node that idles through every state may lag when it takes over (it answers late
-        # rather than never: its queues are deep enough).
-        s = Script(tmp_path, *args, "--set", "sim.lockstep_timeout=5")
+        # rather than never: its queues are deep enough). Paced at half real time: the steps
+        # wait for wall-clock things (a node's start, `hexapod switch`, status polls), and
+        # an unpaced graph would spend both cores meanwhile.
+        s = Script(tmp_path, *args, "--set", f"sim.lockstep_timeout={lockstep_timeout:g}",
+                   "--set", "sim.lockstep_max_rtf=0.5")
         started.append(s)
         return s
 
@@ -170,9 +173,10 @@ def switch(s: Script, name: str, timeout: float = 60.0) -> str:
 
 
 def sim_time(s: Script) -> float:
-    r = hexapod_cli(s.domain, "status", "--json")
-    assert r.returncode == 0, r.stderr
-    return float(json.loads(r.stdout)["status"]["sim_time"])
+    """Sim time (s) the run has reached at least: the end of the newest cycle the recorder
+    has scored (its log; polled without starting a process, as `hexapod status` would)."""
+    ends = re.findall(r"\[metrics\]: cycle \d+ \[[\d.]+, ([\d.]+)\] s", s.log("metrics"))
+    return float(ends[-1]) if ends else 0.0
 
 
 def switch_tick(s: Script, old: str, new: str) -> float:
@@ -291,7 +295,10 @@ def test_controller_from_the_doc_joins_and_an_unsigned_one_is_counted(join_scrip
 def test_joined_controller_death_holds_falls_back_and_exits_7(join_script, tmp_path):
     script = tmp_path / "spec_node.py"
     script.write_text(SPEC_NODE)
-    s = join_script("--duration", "0", "--no-switch", "--no-builtin", "pd_p")
+    # (1 s, not 5, to wait for the dead node's command: a slow takeover would show as a
+    # missed tick before the kill, and the run must end in the fallback either way)
+    s = join_script("--duration", "0", "--no-switch", "--no-builtin", "pd_p",
+                    lockstep_timeout=1.0)
     key = key_file(s)
     s.wait_log("hexapod_sim", "lockstep mode")
     spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",

@@ -13,6 +13,10 @@ from hexapod_common.core import topics as T
 
 from .bag_checks import MS, check_indexed_ordered_bag, read_with_rosbags
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_graph_log_times")
+
 DURATION, SWITCH_AT = 2.5, 1.0
 STRIDE = 33 * MS  # markers at 30 Hz of sim time with 1 kHz control
 STAMPED = (T.CLOCK, T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,

@@ -20,6 +20,10 @@ from hexapod_common.core.layout import O_TH, O_TQ
 from .conftest import (CLIENT_NODE, call, fast_params, finish_recorded_run, ros_client,
                        start_recorded_run)
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_graph_params")
+
 DURATION = 4.0
 
 

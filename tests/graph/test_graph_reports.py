@@ -25,6 +25,10 @@ from hexapod_common.core import topics as T
 from .conftest import hexapod_cli
 from .test_graph_exits import Script, table_rows
 
+#: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
+#: pytest-xdist's loadgroup distribution.
+pytestmark = pytest.mark.xdist_group("test_graph_reports")
+
 HOSTILE = Path(__file__).with_name("hostile_node.py")
 NODES = ["hexapod_sim", "metrics", "pd_p_controller", "pd_pf_controller",
          "trajectory_generator"]
@@ -48,9 +52,11 @@ def seen(tmp_path_factory):
     # A long lockstep timeout (as test_graph_hostile.py): on a loaded 2-core machine, with
     # the rogue's flood beside it, a starved controller can take more than the default
     # 0.5 s to answer; a missed tick (a 'mixed' cycle) or a fallback (exit 7) would then be
-    # the machine's doing, not what these tests look at.
+    # the machine's doing, not what these tests look at. Paced at a quarter of real time: the
+    # steps wait for wall-clock things (status polls, the rogue's coming and going), and an
+    # unpaced graph would spend both cores meanwhile.
     s = Script(tmp, "--duration", "0", "--no-switch", "--controller", "pd_p",
-               "--set", "sim.lockstep_timeout=20.0")
+               "--set", "sim.lockstep_timeout=20.0", "--set", "sim.lockstep_max_rtf=0.25")
     out: dict = {}
     rogue = None
     try:

@@ -58,7 +58,7 @@ def switch_in_process(client, controller: str) -> None:
     # keeps busy, a ROS participant at normal priority did not even discover the sim's
     # services within 60 s (docs/benchmarks.md, fifth stop).
     ("lockstep", 0.001, 8.0, 0),
-    pytest.param("realtime", 0.004, 6.0, 0, marks=pytest.mark.realtime),
+    pytest.param("realtime", 0.004, 4.0, 0, marks=pytest.mark.realtime),
     pytest.param("realtime", 0.001, 4.0, 20, marks=[pytest.mark.realtime, pytest.mark.skipif(
         not realtime_permitted(20), reason="SCHED_FIFO not permitted here")]),
 ])
