@@ -118,6 +118,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                           check=args.check,
                           progress=prog("T_max sweep", len(vals) * len(controllers) * runs))
         results.append(("tmax", res, 1.0, "T_max (N m)", False))
+    figures: list[plots.SweepFigure] = []
     for tag, res, xs, xl, logx in results:
         rows = res.rows()
         with (out / f"sweep_{tag}.csv").open("w", newline="") as f:
@@ -125,9 +126,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             w.writeheader()
             w.writerows(rows)
         (out / f"sweep_{tag}.json").write_text(json.dumps(rows, indent=1, default=float))
-        for name in INDEX_NAMES:
-            plots.sweep_plot(res, (name,), out / f"sweep_{tag}_{name}.png",
-                             f"{name}: {tag}", x_scale=xs, x_label=xl, log_x=logx)
+        figures += [(res, (name,), out / f"sweep_{tag}_{name}.png", f"{name}: {tag}",
+                     dict(x_scale=xs, x_label=xl, log_x=logx)) for name in INDEX_NAMES]
         print(f"{res.variable} sweep ({', '.join(f'{k}={v:g}' for k, v in res.fixed.items())})")
         print(f"{'value':>10} {'controller':>10} " + " ".join(f"{n:>10}" for n in INDEX_NAMES)
               + (" converged" if args.check else ""))
@@ -137,6 +137,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             if args.check:
                 vals += "  yes" if r["converged"] else f"  NO ({r['unconverged']})"
             print(f"{r[res.variable] * xs:>10.4g} {r['controller']:>10} {vals}")
+    plots.sweep_plots(figures, backend)
     print(f"results and plots in {out}")
     return 0
 

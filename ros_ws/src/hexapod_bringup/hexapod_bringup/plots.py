@@ -5,8 +5,9 @@ Time plots (Figs. 4-7, 16-17): one curve per controller. Sweep plots (Figs. 8-15
 """
 from __future__ import annotations
 
+import io
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -156,6 +157,36 @@ def sweep_plot(res: SweepResult, names: Sequence[str], path: Path, title: str,
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+#: One sweep figure to draw: (result, index names, output path, title, sweep_plot keywords).
+SweepFigure = tuple[SweepResult, Sequence[str], Path, str, dict[str, Any]]
+
+
+def _sweep_png(fig: tuple[SweepResult, Sequence[str], str, dict[str, Any]]) -> bytes:
+    res, names, title, kw = fig
+    buf = io.BytesIO()
+    sweep_plot(res, names, buf, title, **kw)  # type: ignore[arg-type]
+    return buf.getvalue()
+
+
+def sweep_plots(figures: Sequence[SweepFigure], backend: Any = None) -> list[Path]:
+    """Draw sweep figures (:func:`sweep_plot`); on the local worker processes of ``backend``
+    when it has them (a ``ProcessBackend``: its workers are idle once the runs are done, and
+    the figures then take half the wall time on two cores), else here. The PNG files are
+    written here either way."""
+    from .core.parallel import ProcessBackend
+
+    jobs = [(res, names, title, kw) for res, names, _, title, kw in figures]
+    if isinstance(backend, ProcessBackend) and backend.workers > 1 and len(jobs) > 1:
+        pngs = dict(backend.calls(_sweep_png, jobs))
+    else:
+        pngs = {k: _sweep_png(job) for k, job in enumerate(jobs)}
+    paths = []
+    for k, (_, _, path, _, _) in enumerate(figures):
+        Path(path).write_bytes(pngs[k])
+        paths.append(Path(path))
+    return paths
 
 
 def rate_plot(sweeps: Mapping[float, SweepResult], name: str, path: Path, title: str) -> Path:
