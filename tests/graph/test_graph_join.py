@@ -41,6 +41,7 @@ SPEC_NODE = r'''
 import hashlib, os, secrets, struct, sys
 import rclpy
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
@@ -69,7 +70,8 @@ class Spec(Node):
             self.declare_parameter(n, KP[n[3:]])
         self.seq, self.refs, self.pending = 0, {}, None
         self.pub = self.create_publisher(JointState, TOPIC, 10)
-        self.create_subscription(JointState, "/hexapod/reference", self.on_ref, 100)
+        self.create_subscription(JointState, "/hexapod/reference", self.on_ref, QoSProfile(
+            depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # as the doc advises
         self.create_subscription(JointState, "/hexapod/joint_states", self.on_state, 100)
 
     def on_ref(self, m):
@@ -122,12 +124,13 @@ def join_script(tmp_path: Path):
     def start(*args: str, lockstep_timeout: float = 5.0) -> Script:
         # Ten times the default wait for a command: on a shared, loaded machine a Python
         # node that idles through every state may lag when it takes over (it answers late
-        # rather than never: its queues are deep enough). Not paced (sim.lockstep_max_rtf):
-        # a node written from the doc subscribes to the references as a volatile reader,
-        # so it misses those the generator sent (50 ticks ahead) before its reader matched,
-        # and pacing makes those 50 ticks a longer wall time (once seen: the doc's node
-        # lost the switch tick's reference and the run fell back).
-        s = Script(tmp_path, *args, "--set", f"sim.lockstep_timeout={lockstep_timeout:g}")
+        # rather than never: its queues are deep enough). Paced at half real time: the steps
+        # wait for wall-clock things (a node's start, `hexapod switch`), and an unpaced graph
+        # would spend both cores meanwhile. (The joining nodes read the references as
+        # transient-local readers, as docs/controllers.md advises: a volatile one misses
+        # those sent, up to 50 ticks ahead, before it matched; once seen with pacing.)
+        s = Script(tmp_path, *args, "--set", f"sim.lockstep_timeout={lockstep_timeout:g}",
+                   "--set", "sim.lockstep_max_rtf=0.5")
         started.append(s)
         return s
 

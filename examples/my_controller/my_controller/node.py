@@ -8,6 +8,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 
 from hexapod_common.auth import signer  # the only project import: signs the commands
@@ -32,8 +33,10 @@ class MyController(Node):
         self.sign = signer("/hexapod/joint_commands")
         self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 10)
         # deeper queues than the default 10: references come in bursts up to 50 ticks ahead,
-        # and a state must not roll out while the node catches up (answer late, not never)
-        self.create_subscription(JointState, "/hexapod/reference", self.on_reference, 200)
+        # and a state must not roll out while the node catches up (answer late, not never);
+        # transient-local: the references sent before this reader matched come too
+        refs_qos = QoSProfile(depth=200, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.create_subscription(JointState, "/hexapod/reference", self.on_reference, refs_qos)
         self.create_subscription(JointState, "/hexapod/joint_states", self.on_state, 100)
 
     def on_reference(self, msg):
