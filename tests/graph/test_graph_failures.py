@@ -168,6 +168,8 @@ def _bad_params_file(tmp_path: Path, name: str, value: object) -> Path:
 @pytest.mark.parametrize("node, name, value, message", [
     ("hexapod_sim", "ground.k_y", -1,
      "parameter 'ground.k_y' = -1.0 is invalid: allowed float in [0, 1e+12]"),
+    ("hexapod_sim", "sim.lockstep_max_rtf", -1,
+     "parameter 'sim.lockstep_max_rtf' = -1.0 is invalid: allowed float in [0, 1e+06]"),
     ("hexapod_sim", "gait.duty_factor", 1.5,
      "parameter 'gait.duty_factor' = 1.5 is invalid: allowed float in (0, 1)"),
     ("pd_pf_controller", "actuator.t_max", 0.0,

@@ -218,6 +218,9 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
     assert any(k.startswith(f"dropped {T.JOINT_COMMANDS} (") for k in values)
     assert f"dropped a message on {T.JOINT_STATES}" in logs["pd_pf_controller"]
     assert "inputs: dropped" in logs["pd_p_controller"]
+    # the controllers' wake-up topic: garbage and forgeries dropped and counted, not obeyed
+    for node in ("pd_p_controller", "pd_pf_controller"):
+        assert f"dropped a message on {T.ACTIVE_CONTROLLER}" in logs[node], node
     assert f"dropped a message on {T.JOINT_STATES}" in logs["trajectory_generator"]
 
 
