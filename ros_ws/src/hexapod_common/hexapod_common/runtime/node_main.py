@@ -7,9 +7,18 @@ line and an exit code (2: bad parameters or no key, ``ParameterError``/``AuthErr
 another error, a diverged model included); then the node's own finish step (summaries,
 closing a bag; it may change the exit code), the loop and the node destroyed,
 ``rclpy.try_shutdown``.
+
+Once the finish step is done, the node's work is saved: a teardown (node destruction, rclpy
+and Fast DDS shutdown) that has not returned within :data:`TEARDOWN_S` ends the process with
+the node's exit code and one log line. Under CPU load, beside peers killed by a signal, a
+node was seen to hang there for 20 s and more after its summary; the launcher then killed it
+and reported a node that died.
 """
 from __future__ import annotations
 
+import os
+import sys
+import threading
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
@@ -21,6 +30,8 @@ from .hot_loop import HotLoop, init_rclpy, install_stop_signals
 EXIT_BAD_SETTINGS = 2
 #: Exit code of any other error (a diverged model included).
 EXIT_ERROR = 1
+#: Wall s the teardown after the finish step may take before the process ends without it.
+TEARDOWN_S = 5.0
 
 
 class _LoopNode(Protocol):
@@ -74,10 +85,27 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
                 if finish is not None:
                     code = finish(node, code)
             finally:
+                watchdog = _teardown_watchdog(name, code)
                 node.loop.destroy()
                 node.destroy_node()
         rclpy.try_shutdown()
+        if node is not None:
+            watchdog.cancel()
     return code
+
+
+def _teardown_watchdog(name: str, code: int) -> threading.Timer:
+    """A started timer that ends the process with ``code`` after :data:`TEARDOWN_S` s."""
+    def expire() -> None:
+        print(f"[{name}] teardown did not end within {TEARDOWN_S:g} s: exiting "
+              f"(code {code})", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(code)
+
+    timer = threading.Timer(TEARDOWN_S, expire)
+    timer.daemon = True
+    timer.start()
+    return timer
 
 
 __all__ = ["EXIT_BAD_SETTINGS", "EXIT_ERROR", "exit_code", "run_node"]
