@@ -120,7 +120,8 @@ def test_switch_loses_no_tick_and_lands_in_the_bag(make_graph, tmp_path, mode, p
     if mode == "lockstep":
         assert answered == list(range(n))
     assert all(commands[k] == states[k] for k in answered)
-    assert {switch - 1, switch} <= set(answered)
+    assert {switch - 1, switch} <= set(answered), (
+        summary, g.log(f"{states[switch]}_controller")[-2000:], g.log("metrics")[-2000:])
     if mode == "realtime":
         assert set(range(switch - 1, min(n, switch + 4))) <= set(answered)
     assert announced == ["pd_pf", "pd_p"]

@@ -402,6 +402,8 @@ class ControllerNode(LifecycleNode):
             # takes charge: a fresh, reset instance (the engine's closed loop does the same)
             self.ctrl = registry.create(self.arch, self.binding.params)
         self.in_charge = mine
+        if mine:  # our states wake us, also if the sim's announcement is late or lost
+            self.loop.set_wake(self.subs[T.JOINT_STATES], True)
         if mine and T.REFERENCE in self.subs:
             self._check_unchecked(stamp)  # this tick's, kept while another was in charge
             self.loop.take(self.subs[T.REFERENCE])
