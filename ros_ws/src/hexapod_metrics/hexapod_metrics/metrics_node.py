@@ -82,11 +82,18 @@ class MetricsNode(Node):
         # for its slowest topic (as offline), and is given up only if a topic stays 10 cycles
         # behind the others (dead; memory stays bounded).
         n = int(round(p.cycle_time / self.period))
-        self.scorer = CycleScorer(n, self.period, gap_ticks=10 * n)
+        gap = 10 * n
+        self.scorer = CycleScorer(n, self.period, gap_ticks=gap)
         self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"},
                                 flush_interval_s=0.5, sync_topics=TICK_TOPICS,
                                 follow_topics=(T.MARKERS,),
                                 reorder_window_ns=int(window * 1e9),
+                                # a tick topic is given up as dead when the scorer gives up
+                                # its cycles: a live one the recorder fell seconds behind on
+                                # still holds the chunks, so a kill leaves every tick topic
+                                # ending at the same tick (R11; 2 s was too short: seen once
+                                # in the suite, a late-joining recorder's states 2 s behind)
+                                max_lag_ns=int(round(gap * self.period * 1e9)),
                                 max_file_size=int(max_size),
                                 max_file_duration_ns=int(max_duration * 1e9))
         self.writer.open()
