@@ -7,7 +7,8 @@ import pytest
 from hexapod_control.core.closed_loop import Case
 from hexapod_bringup.core.experiments import ground_sweep, hip_score, select_best, tune, walking
 from hexapod_metrics.core.indices import Indices
-from hexapod_bringup.core.parallel import InlineBackend, ProcessBackend, make_backend
+from hexapod_bringup.core.parallel import (InlineBackend, MemoBackend, ProcessBackend,
+                                          make_backend, run_cases)
 from hexapod_bringup.core.simulate import Outcome, simulate
 from hexapod_common.core.layout import O_TQ
 from hexapod_common.core.params import load_params
@@ -128,3 +129,38 @@ def test_tuner_finds_the_planted_optimum():
     assert res.best_score == pytest.approx(res.reference_score)
     assert res.improvement == pytest.approx(0.0, abs=1e-12)
     assert len(res.gains) == 8 and np.all(np.isfinite(res.scores))
+
+
+class _Counting:
+    """The inline backend, counting the cases it runs."""
+
+    def __init__(self) -> None:
+        self.inner = InlineBackend()
+        self.ran: list[Case] = []
+
+    def map(self, chunks):
+        for chunk in chunks:
+            self.ran.extend(chunk[1])
+        return self.inner.map(chunks)
+
+    def calls(self, fn, items):
+        return self.inner.calls(fn, items)
+
+
+def test_memo_backend_runs_each_case_once_and_returns_what_a_rerun_gives():
+    p = load_params()
+    grounds = [p.with_values(**{"ground.scale": s}) for s in (0.5, 2.0)]
+    cases = [Case(q, c) for q in grounds for c in ("pd_p", "pd_pf")]
+    fresh = run_cases(cases, 1.0, InlineBackend())
+    counting = _Counting()
+    memo = MemoBackend(counting)
+    # a case twice in one call, then again in a later call with a new one
+    first = run_cases(cases + cases[:1], 1.0, memo, chunk_size=3)
+    later = run_cases([cases[2], Case(p, "pd_p")], 1.0, memo)
+    assert [o.indices for o in first] == [o.indices for o in fresh + fresh[:1]]
+    assert later[0].indices == fresh[2].indices
+    assert counting.ran == cases + [Case(p, "pd_p")]
+    assert memo.reused == 2
+    # another duration is another run
+    run_cases(cases[:1], 1.5, memo)
+    assert len(counting.ran) == 6

@@ -29,7 +29,7 @@ from .core.convergence import REFINEMENTS, Convergence, check_cases, refined
 from .core.experiments import (RateResult, SweepResult, TuneResult, ground_sweep,
                                rate_experiment, sweep, t_max_sweep, tune)
 from hexapod_metrics.core.indices import INDEX_NAMES, INDEX_UNITS, REPORTED_NAMES
-from .core.parallel import Backend
+from .core.parallel import Backend, MemoBackend
 from .core.simulate import Simulation, simulate, window_ticks
 from hexapod_metrics.core.impacts import impact_torque
 
@@ -466,8 +466,11 @@ def _why(v: claims.Verdict) -> str:
 
 def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None = None,
               progress: ProgressFactory = _no_progress) -> list[claims.Verdict]:
-    """Run E6 and E1-E5, write ``out``/README.md, figures, CSV/JSON data; return the verdicts."""
+    """Run E6 and E1-E5, write ``out``/README.md, figures, CSV/JSON data; return the verdicts.
+
+    Each (case, duration) runs once: the experiments share points (MemoBackend)."""
     plan = plan or Plan()
+    backend = MemoBackend(backend)
     out.mkdir(parents=True, exist_ok=True)
     rate = 1.0 / p.sim.control_period
     duration = p.run.duration

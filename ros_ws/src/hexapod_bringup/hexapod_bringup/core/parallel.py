@@ -227,6 +227,53 @@ def make_backend(name: str = "processes", address: str | None = None) -> Backend
     return BACKENDS[name]()
 
 
+class MemoBackend:
+    """Another backend that runs each (case, duration) once: a chunk's cases seen before
+    are taken from memory, the rest run on ``inner`` (the report's experiments share many
+    points: the base case, the ground sweeps at 400 N m, PD^alpha at its own alpha; a
+    quarter of ``reproduce --quick``'s runs). A case's outcome does not depend on the
+    cases batched with it (tests/test_engine.py), so the numbers are those of a rerun."""
+
+    def __init__(self, inner: Backend) -> None:
+        self.inner = inner
+        self.known: dict[tuple[Case, float], Outcome] = {}
+        #: runs taken from memory instead of being run again
+        self.reused = 0
+
+    def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
+        known = self.known
+        todo: list[Chunk] = []
+        scheduled: set[tuple[Case, float]] = set()
+        waiting: list[Chunk] = []
+        for chunk in chunks:
+            _, cases, duration = chunk
+            missing = [c for c in cases
+                       if (c, duration) not in known and (c, duration) not in scheduled]
+            scheduled.update((c, duration) for c in missing)
+            if missing:
+                todo.append((len(todo), missing, duration))
+            waiting.append(chunk)
+        self.reused += sum(len(c[1]) for c in chunks) - len(scheduled)
+
+        def ready() -> Iterator[tuple[int, list[Outcome]]]:
+            for chunk in list(waiting):
+                start, cases, duration = chunk
+                if all((c, duration) in known for c in cases):
+                    waiting.remove(chunk)
+                    yield start, [known[(c, duration)] for c in cases]
+
+        yield from ready()
+        for start, outcomes in self.inner.map(todo):
+            _, cases, duration = todo[start]
+            for c, o in zip(cases, outcomes):
+                known[(c, duration)] = o
+            yield from ready()
+
+    def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]:
+        """The inner backend's (single runs are not kept)."""
+        return self.inner.calls(fn, items)
+
+
 def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
               chunk_size: int = 8,
               progress: Callable[[int], None] | None = None) -> list[Outcome]:
@@ -255,4 +302,5 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
 
 
 __all__ = ["BACKENDS", "Backend", "DaskBackend", "InlineBackend", "LOCAL_PREFIX",
-           "ProcessBackend", "evaluate_chunk", "local_workers", "make_backend", "run_cases"]
+           "MemoBackend", "ProcessBackend", "evaluate_chunk", "local_workers", "make_backend",
+           "run_cases"]
