@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from .actuator import clip_torque
-from .engine import prepare, solve, state_ok
+from .engine import euler_step, prepare, solve, state_ok
 from hexapod_common.core.kinematics import foot_force_torque
 from hexapod_common.core.layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF,
                                         COMMAND_FIELDS, COMMAND_SHAPE, P_DT, P_L1, P_L2,
@@ -82,11 +82,7 @@ def drive_advance(s, cmd, P, n_steps, fh, work, ff, qdd, demand0, torque):  # ty
         if k == 0:
             demand0[:, :] = demand
         solve(s, torque, P, fh, work, ff, qdd)
-        for i in range(N_LEGS):
-            for j in range(4):
-                v = s[V0 + 4 * i + j] + dt * qdd[i, j]
-                s[V0 + 4 * i + j] = v
-                s[Q0 + 4 * i + j] += dt * v
+        euler_step(s, qdd, dt)
     return state_ok(s)
 
 

@@ -175,6 +175,17 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def euler_step(s, qdd, dt):  # type: ignore[no-untyped-def]
+    """The explicit Euler update of one physics step, in place: dq += dt ddq, then
+    q += dt dq (the new dq); ``qdd`` (6, 4) from :func:`solve`, ``dt`` (s)."""
+    for i in range(N_LEGS):
+        for j in range(4):
+            v = s[V0 + 4 * i + j] + dt * qdd[i, j]
+            s[V0 + 4 * i + j] = v
+            s[Q0 + 4 * i + j] += dt * v
+
+
+@njit(cache=True)
 def advance_prepared(s, torque, P, n_steps, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
     """Integrate ``n_steps`` physics steps of P[P_DT] under the held ``torque`` (6, 2), in place,
     the first from fh/work that :func:`prepare` (or :func:`observe_prepared`) filled at the
@@ -187,11 +198,7 @@ def advance_prepared(s, torque, P, n_steps, fh, work, ff, qdd):  # type: ignore[
         if k > 0:
             prepare(s, P, fh, work)
         solve(s, torque, P, fh, work, ff, qdd)
-        for i in range(N_LEGS):
-            for j in range(4):
-                v = s[V0 + 4 * i + j] + dt * qdd[i, j]
-                s[V0 + 4 * i + j] = v
-                s[Q0 + 4 * i + j] += dt * v
+        euler_step(s, qdd, dt)
     return state_ok(s)
 
 
@@ -281,6 +288,6 @@ def initial_state(p: HexapodParams) -> np.ndarray:
     return s
 
 
-__all__ = ["W_SIZE", "accelerations", "advance", "advance_prepared", "initial_state",
+__all__ = ["W_SIZE", "accelerations", "advance", "advance_prepared", "euler_step", "initial_state",
            "leg_contact_solve", "observe", "observe_prepared", "prepare", "scratch", "solve",
            "state_ok"]
