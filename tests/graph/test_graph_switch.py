@@ -9,6 +9,7 @@ import pytest
 from hexapod_metrics.bag import open_bag
 from hexapod_common.runtime import conversions as C
 from hexapod_common.core import topics as T
+from hexapod_common.core.controller_names import node_of
 from hexapod_common.core.labels import in_charge
 from hexapod_common.core.switch_channel import request
 from hexapod_common.runtime.rt_sched import realtime_permitted
@@ -121,7 +122,7 @@ def test_switch_loses_no_tick_and_lands_in_the_bag(make_graph, tmp_path, mode, p
         assert answered == list(range(n))
     assert all(commands[k] == states[k] for k in answered)
     assert {switch - 1, switch} <= set(answered), (
-        summary, g.log(f"{states[switch]}_controller")[-2000:], g.log("metrics")[-2000:])
+        summary, g.log(node_of(states[switch]))[-2000:], g.log("metrics")[-2000:])
     if mode == "realtime":
         assert set(range(switch - 1, min(n, switch + 4))) <= set(answered)
     assert announced == ["pd_pf", "pd_p"]

@@ -63,6 +63,7 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
     if not init_rclpy(args, name):
         return EXIT_BAD_SETTINGS
     node: N | None = None
+    watchdog: threading.Timer | None = None
     code = 0
     caught: tuple[type[Exception], ...] = (HexapodError, *errors)
     try:
@@ -89,7 +90,7 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
                 node.loop.destroy()
                 node.destroy_node()
         rclpy.try_shutdown()
-        if node is not None:
+        if watchdog is not None:
             watchdog.cancel()
     return code
 
