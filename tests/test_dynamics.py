@@ -5,9 +5,9 @@ import pytest
 from hexapod_sim.core.body import LINKS, body_forces
 from hexapod_sim.core.contact import limit_force, spring_damper, update_contact
 from hexapod_sim.core.dynamics import bias_forces, leg_accel, mass_matrix
-from hexapod_sim.core.engine import advance, initial_state
+from hexapod_sim.core.engine import advance, initial_state, legs
 from hexapod_common.core.layout import (P_G, P_HIPX, P_KBX, P_KBY, P_L1, P_L2, P_MF, P_MH, P_MK,
-                                        legs, model_vector)
+                                        model_vector)
 from hexapod_common.core.params import load_params
 
 

@@ -24,6 +24,7 @@ import pytest
 from hexapod_bringup.graph_launcher import EXIT_CODES
 from hexapod_common.core import topics as T
 from hexapod_common.runtime import conversions as C
+from hexapod_common.runtime.dds_profile import private_profile
 from hexapod_metrics.bag import open_bag
 
 from .bag_checks import recorded_obs
@@ -305,8 +306,11 @@ def test_joined_controller_death_holds_falls_back_and_exits_7(join_script, tmp_p
                     lockstep_timeout=1.0)
     key = key_file(s)
     s.wait_log("hexapod_sim", "lockstep mode")
+    # Its own Fast DDS profile with the graph's 2 s lease (docs/controllers.md): with Fast
+    # DDS's default 20 s lease the graph would see the killed node leave 20 s later.
     spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",
-                      HEXAPOD_KEY_FILE=key)
+                      HEXAPOD_KEY_FILE=key,
+                      FASTRTPS_DEFAULT_PROFILES_FILE=str(private_profile(tmp_path)))
     switch(s, "spec_ctl")
     switch_tick(s, "pd_pf", "spec_ctl")
     spec.kill()

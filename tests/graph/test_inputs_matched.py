@@ -5,7 +5,8 @@ side (hexapod_common/runtime/inputs_matched.py). Real rclpy endpoints in a fresh
 the graph's Fast DDS profile: a node reading joint states and references answers "not
 matched" naming the joint states while no one publishes them (a reference publisher does
 not count: the sim does not write references), then "matched" once a joint-state writer
-has matched on its side; a node without such a reader is ready at once. Answers carry the
+has matched on its side, counting the command writers its command reader matched (none
+here); a node without such a reader is ready at once. Answers carry the
 run key's tag: an impostor's answer (no key), a genuine answer with its flag flipped,
 moved to another node or replayed, and garbage (empty, no tag, a tag that is not hex, a
 zero tag, 100 kB of text, odd characters) are dropped and counted. The graph-level case (the sim
@@ -40,7 +41,7 @@ rclpy.init()
 reader = rclpy.create_node("metrics")
 subs = [reader.create_subscription(JointState, t, lambda m: None,
                                    C.TOPIC_QOS[t].subscriber(10), raw=True)
-        for t in (T.JOINT_STATES, T.REFERENCE)]
+        for t in (T.JOINT_STATES, T.REFERENCE, T.JOINT_COMMANDS)]
 inputs_matched.offer(reader, lambda: subs, InputGuard(reader, reader.get_logger()))
 idle = rclpy.create_node("pd_p_controller")
 idle_subs = [idle.create_subscription(JointState, T.REFERENCE, lambda m: None,
@@ -112,7 +113,7 @@ def test_a_reader_is_ready_once_its_sim_topics_have_matched_a_writer(tmp_path):
                    "idle": [True, ""],
                    "impostor": [True, None],
                    "reference_only": [False, "/hexapod/joint_states"],
-                   "after": [True, ""]}
+                   "after": [True, "/hexapod/joint_commands=0"]}  # counted, no writer
     assert drops == {"dropped": "10",
                      "dropped /markers/inputs_matched (unauthenticated)": "1",
                      "dropped /metrics/inputs_matched (unauthenticated)": "7",  # flipped, garbage
@@ -180,3 +181,18 @@ def test_an_impostor_cannot_start_the_run(make_graph, tmp_path):
                         r"unauthenticated", sim)
     assert counted and counted[1] == counted[2], sim
     assert 1 <= int(counted[1]) <= asked  # every answer it took (one may come after the end)
+
+
+def test_a_ready_answer_counts_command_writers_and_the_sim_waits_for_all_of_them():
+    """A recorder that matched fewer command writers than the sim has is not ready yet: it
+    would lose a joined controller's first commands."""
+    from hexapod_common.runtime.inputs_matched import behind
+
+    expected = {"/hexapod/joint_commands": 2}
+    assert behind("/hexapod/joint_commands=2", expected) == ""
+    assert behind("/hexapod/joint_commands=3", expected) == ""
+    assert behind("", expected) == ""  # a node without a command reader
+    assert behind("/hexapod/joint_commands=1", expected) == (
+        "readers of /hexapod/joint_commands matched 1 of 2 writers")
+    assert behind("/hexapod/joint_commands=x", expected).startswith("a malformed answer")
+    assert behind("/other=0", expected) == ""

@@ -359,7 +359,12 @@ class SimNode(Node):
                     if text is None:
                         waiting[name] = "its answers are not authentic (dropped)"
                     elif res.success:
-                        del waiting[name]
+                        short = inputs_matched.behind(
+                            text, {T.JOINT_COMMANDS: self.cmd_sub.get_publisher_count()})
+                        if short:
+                            waiting[name] = short
+                        else:
+                            del waiting[name]
                     else:
                         waiting[name] = f"readers of {text} not matched"
             return not waiting
@@ -631,13 +636,18 @@ class SimNode(Node):
         if state != "active":
             self.channel.reply(addr, f"error {node_of(to)} is {state}: not active")
             return
-        self._set_controller(to, addr)
+        self._set_controller(to, addr, state_checked=True)
 
-    def _set_controller(self, to: str, addr: str) -> None:
-        """Set run.controller = ``to`` (its checks) and answer the switch request."""
+    def _set_controller(self, to: str, addr: str, state_checked: bool = False) -> None:
+        """Set run.controller = ``to`` (its checks) and answer the switch request. A node
+        taken for a plain one whose lifecycle services were discovered meanwhile (they are
+        announced one by one) has its state asked first, as a lifecycle node would."""
         assert self.channel is not None
         old = self.ticks.in_charge
         result = self.set_parameters([Parameter("run.controller", value=to)])[0]
+        if not result.successful and not state_checked and self._lifecycle(node_of(to)):
+            self._ask_state(to, addr)
+            return
         if not result.successful:
             self.channel.reply(addr, f"error hexapod_sim refused run.controller = {to}: "
                                      f"{result.reason}")

@@ -17,9 +17,7 @@ import numpy as np
 from numba import njit
 
 from .errors import UnreachableTargetError
-
-#: Legs of the robot: three a side, each a planar two-link chain.
-N_LEGS = 6
+from .robot import N_LEGS
 
 
 @njit(cache=True)

@@ -11,11 +11,13 @@ Model vector ``P`` (float64, length :data:`MODEL_SIZE`): the physical parameters
 effective ground values (base x scale), the integrator flag and the nominal hip offsets.
 
 Observation ``obs`` (float64, shape (9, 6, 2)) at one control tick, rows :data:`OBS_FIELDS`.
+
+Constants only (no numba): the command line and the topic table import them and start
+fast; the compiled views into a state vector are the engine's (``engine.legs``).
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from .params import N_LEGS, HexapodParams
 
@@ -57,10 +59,4 @@ def model_vector(p: HexapodParams) -> np.ndarray:
     return P
 
 
-@njit(cache=True)
-def legs(s):  # type: ignore[no-untyped-def]
-    """Views (q, dq) of shape (6, 4) into a state vector (the engine's, compiled)."""
-    return s[Q0:Q0 + 24].reshape(N_LEGS, 4), s[V0:V0 + 24].reshape(N_LEGS, 4)
-
-
-__all__ = [name for name in dir() if name.isupper() or name in ("model_vector", "legs")]
+__all__ = [name for name in dir() if name.isupper() or name == "model_vector"]

@@ -31,7 +31,7 @@ from typing import Any, Mapping
 import yaml
 
 from .errors import ParameterError, ParamsFileError
-from .kinematics import N_LEGS
+from .robot import N_LEGS
 
 #: The built-in controllers with a compiled law (the ROS graph's controller nodes). Every
 #: registered controller (:func:`controller_names`) is accepted by ``run.controller``.

@@ -10,8 +10,12 @@ samples sent meanwhile were dropped there (a volatile reader takes nothing from 
 does not know yet): 2 of 4 bags began at tick ~200. Only the reading node can tell when its
 readers have matched, so it answers: ``success`` is true when each of its subscriptions to
 a topic of :data:`SIM_TOPICS` has matched at least one writer; ``message`` lists the topics
-still waiting (empty when ready). A node with no such subscription (an inactive
-controller) is ready.
+still waiting. A node with no such subscription (an inactive controller) is ready. A ready
+node's message counts the writers its readers of :data:`COUNTED_TOPICS` have matched
+(``/hexapod/joint_commands=2``; empty without such readers): those writers are the
+controllers, not the sim, and the sim waits until the count reaches the number of command
+writers it has matched itself (:func:`behind`). A recorder that matched a joined controller
+~60 ms after tick 0 had lost its first commands.
 
 The answer is authenticated like the graph's messages (core/msg_auth.py): with the run's key
 the message ends with ``|`` and the hex trailer of the answer (the success flag and the
@@ -22,7 +26,7 @@ the run before that node's readers have matched.
 """
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 from rclpy.node import Node
 from rclpy.service import Service
@@ -36,12 +40,35 @@ from .input_guard import InputGuard
 SERVICE = "inputs_matched"
 #: The topics whose writer is the sim: tick 0 waits until their readers have matched it.
 SIM_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
+#: Topics written by others (the controllers) whose readers' matched writers a ready answer
+#: counts: tick 0 waits until they have matched as many writers as the sim's reader.
+COUNTED_TOPICS = (T.JOINT_COMMANDS,)
 
 
 def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
     """Topics of :data:`SIM_TOPICS` among ``subscriptions`` with no matched writer yet."""
     return sorted({s.topic_name for s in subscriptions
                    if s.topic_name in SIM_TOPICS and s.get_publisher_count() < 1})
+
+
+def counted(subscriptions: Iterable[Subscription]) -> str:
+    """A ready answer's text: ``topic=writers`` of each subscription to a topic of
+    :data:`COUNTED_TOPICS`, comma-separated (empty without such subscriptions)."""
+    return ",".join(sorted(f"{s.topic_name}={s.get_publisher_count()}" for s in subscriptions
+                           if s.topic_name in COUNTED_TOPICS))
+
+
+def behind(text: str, expected: Mapping[str, int]) -> str:
+    """Why a ready answer's counts (:func:`counted`'s ``text``) fall short of ``expected``
+    writers per topic; empty if they do not."""
+    short = []
+    for item in filter(None, text.split(",")):
+        topic, _, count = item.partition("=")
+        if not count.isdigit():
+            return f"a malformed answer ({text[:80]!r})"
+        if int(count) < expected.get(topic, 0):
+            short.append(f"readers of {topic} matched {count} of {expected[topic]} writers")
+    return "; ".join(short)
 
 
 def service_name(node_name: str) -> str:
@@ -86,11 +113,14 @@ def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]],
     signer = guard.signer(service_name(node.get_name()))
 
     def answer(request: Any, response: Any) -> Any:
-        waiting = unmatched(subscriptions())
+        subs = list(subscriptions())
+        waiting = unmatched(subs)
         response.success = not waiting
-        response.message = seal(signer, response.success, ",".join(waiting))
+        response.message = seal(signer, response.success,
+                                ",".join(waiting) if waiting else counted(subs))
         return response
     return node.create_service(Trigger, service_name(node.get_name()), answer)
 
 
-__all__ = ["SERVICE", "SIM_TOPICS", "offer", "opened", "seal", "service_name", "unmatched"]
+__all__ = ["COUNTED_TOPICS", "SERVICE", "SIM_TOPICS", "behind", "counted", "offer", "opened",
+           "seal", "service_name", "unmatched"]

@@ -17,15 +17,16 @@ PR_SET_PDEATHSIG = 1
 PARENT_ENV = "HEXAPOD_PARENT_PID"
 
 
-def die_with_parent(sig: int = signal.SIGTERM) -> bool:
-    """Arrange for ``sig`` when the parent dies; False where prctl is not available."""
+def die_with_parent(sig: int = signal.SIGTERM, parent: int | None = None) -> bool:
+    """Arrange for ``sig`` when the parent dies; False where prctl is not available.
+    ``parent``: the pid of the parent expected (default: ``HEXAPOD_PARENT_PID``'s)."""
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
             return False
     except (OSError, AttributeError):
         return False
-    expected = os.environ.get(PARENT_ENV, "")
+    expected = str(parent) if parent is not None else os.environ.get(PARENT_ENV, "")
     if expected.isdigit() and os.getppid() != int(expected):
         print("node: the launcher is gone before the node started: exiting", file=sys.stderr)
         os._exit(1)

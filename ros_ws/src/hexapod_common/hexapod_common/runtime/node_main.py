@@ -1,7 +1,8 @@
 """The one ``main()`` of every node of the graph (ros2/examples' skeleton, with our hot loop).
 
 :func:`run_node`: ``rclpy.init`` without rclpy's signal handlers (a bad ROS command line is
-one line and exit code 2), build the node, SIGINT/SIGTERM stop its loop
+one line and exit code 2), build the node, log its pid, ROS_DOMAIN_ID and discovery range
+(what the process runs with, whoever started it), SIGINT/SIGTERM stop its loop
 (hot_loop.install_stop_signals), an optional start step, spin the loop; an error is one log
 line and an exit code (2: bad parameters or no key, ``ParameterError``/``AuthError``; 1:
 another error, a diverged model included); then the node's own finish step (summaries,
@@ -68,6 +69,9 @@ def run_node(name: str, make: Callable[[], N], args: list[str] | None = None, *,
     caught: tuple[type[Exception], ...] = (HexapodError, *errors)
     try:
         node = make()
+        rclpy.logging.get_logger(name).info(
+            f"pid {os.getpid()}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, "
+            f"discovery {os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') or 'SUBNET'}")
         install_stop_signals(node.loop)
         if start is not None:
             start(node)

@@ -36,9 +36,15 @@ from hexapod_common.core.gait import reference
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
 from hexapod_common.core.layout import (C0, OBS_FIELDS, P_BBX, P_BBY, P_BGX, P_BGY,
                                         P_DT, P_G, P_HIPX, P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY,
-                                        P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0,
-                                        legs)
+                                        P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0)
 from hexapod_common.core.params import N_LEGS, HexapodParams
+
+
+@njit(cache=True)
+def legs(s):  # type: ignore[no-untyped-def]
+    """Views (q, dq) of shape (6, 4) into a state vector (layout.py: Q0, V0)."""
+    return s[Q0:Q0 + 24].reshape(N_LEGS, 4), s[V0:V0 + 24].reshape(N_LEGS, 4)
+
 
 #: A state is diverged when non-finite or beyond these magnitudes (m or rad, m/s or rad/s).
 MAX_COORD = 1e4
