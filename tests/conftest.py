@@ -41,3 +41,17 @@ def hexapod() -> Callable[..., subprocess.CompletedProcess]:
         return subprocess.CompletedProcess(["hexapod", *args], code, out.getvalue(),
                                            err.getvalue())
     return run
+
+
+#: Tests (or modules) that take 10 s or more of a worker: scheduled first, so that the last
+#: ones a pytest-xdist worker takes are short and the two workers end together (with
+#: collection order, `reproduce --quick` came last and one worker ran it alone for 20 s).
+LONG_FIRST = ("test_reproduce.py::", "test_graph_reports.py::", "test_graph_join.py::",
+              "test_default_graph_records_the_default_simulate_motion",
+              "test_graph_bag_kill.py::", "test_fallback_alone_exits_7",
+              "test_killed_controller_exits_3", "test_graph_foxglove.py::",
+              "test_graph_rates.py::", "test_dask_cluster.py::")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    items.sort(key=lambda item: not any(k in item.nodeid for k in LONG_FIRST))  # stable
