@@ -5,8 +5,8 @@ side (hexapod_common/runtime/inputs_matched.py). Real rclpy endpoints in a fresh
 the graph's Fast DDS profile: a node reading joint states and references answers "not
 matched" naming the joint states while no one publishes them (a reference publisher does
 not count: the sim does not write references), then "matched" once a joint-state writer
-has matched on its side, counting the command writers its command reader matched (none
-here); a node without such a reader is ready at once. Answers carry the
+has matched on its side, counting the writers its command and reference readers matched;
+a node without such a reader is ready at once. Answers carry the
 run key's tag: an impostor's answer (no key), a genuine answer with its flag flipped,
 moved to another node or replayed, and garbage (empty, no tag, a tag that is not hex, a
 zero tag, 100 kB of text, odd characters) are dropped and counted. The graph-level case (the sim
@@ -110,10 +110,10 @@ def test_a_reader_is_ready_once_its_sim_topics_have_matched_a_writer(tmp_path):
     assert out == {"before": [False, "/hexapod/joint_states"],
                    "flipped": None, "moved": None, "replayed": None,
                    "garbage": [None] * 6,
-                   "idle": [True, ""],
+                   "idle": [True, "/hexapod/reference=0"],  # ready, its reader counted
                    "impostor": [True, None],
                    "reference_only": [False, "/hexapod/joint_states"],
-                   "after": [True, "/hexapod/joint_commands=0"]}  # counted, no writer
+                   "after": [True, "/hexapod/joint_commands=0,/hexapod/reference=1"]}
     assert drops == {"dropped": "10",
                      "dropped /markers/inputs_matched (unauthenticated)": "1",
                      "dropped /metrics/inputs_matched (unauthenticated)": "7",  # flipped, garbage
@@ -196,3 +196,6 @@ def test_a_ready_answer_counts_command_writers_and_the_sim_waits_for_all_of_them
         "readers of /hexapod/joint_commands matched 1 of 2 writers")
     assert behind("/hexapod/joint_commands=x", expected).startswith("a malformed answer")
     assert behind("/other=0", expected) == ""
+    both = {"/hexapod/joint_commands": 1, "/hexapod/reference": 1}
+    assert behind("/hexapod/joint_commands=1,/hexapod/reference=0", both) == (
+        "readers of /hexapod/reference matched 0 of 1 writers")

@@ -360,7 +360,8 @@ class SimNode(Node):
                         waiting[name] = "its answers are not authentic (dropped)"
                     elif res.success:
                         short = inputs_matched.behind(
-                            text, {T.JOINT_COMMANDS: self.cmd_sub.get_publisher_count()})
+                            text, {T.JOINT_COMMANDS: self.cmd_sub.get_publisher_count(),
+                                   T.REFERENCE: self.count_publishers(T.REFERENCE)})
                         if short:
                             waiting[name] = short
                         else:

@@ -12,10 +12,12 @@ readers have matched, so it answers: ``success`` is true when each of its subscr
 a topic of :data:`SIM_TOPICS` has matched at least one writer; ``message`` lists the topics
 still waiting. A node with no such subscription (an inactive controller) is ready. A ready
 node's message counts the writers its readers of :data:`COUNTED_TOPICS` have matched
-(``/hexapod/joint_commands=2``; empty without such readers): those writers are the
-controllers, not the sim, and the sim waits until the count reaches the number of command
-writers it has matched itself (:func:`behind`). A recorder that matched a joined controller
-~60 ms after tick 0 had lost its first commands.
+(``/hexapod/joint_commands=2,/hexapod/reference=1``; empty without such readers): those
+writers are the controllers and the trajectory generator, not the sim, and the sim waits
+until each count reaches the number of such writers it sees itself (:func:`behind`). A
+recorder that matched a joined controller ~60 ms after tick 0 had lost its first commands;
+a PD-P&F whose reference reader matched the generator late left tick 0 unanswered for the
+0.5 s lockstep timeout (208 ticks held at 10 kHz).
 
 The answer is authenticated like the graph's messages (core/msg_auth.py): with the run's key
 the message ends with ``|`` and the hex trailer of the answer (the success flag and the
@@ -40,9 +42,10 @@ from .input_guard import InputGuard
 SERVICE = "inputs_matched"
 #: The topics whose writer is the sim: tick 0 waits until their readers have matched it.
 SIM_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
-#: Topics written by others (the controllers) whose readers' matched writers a ready answer
-#: counts: tick 0 waits until they have matched as many writers as the sim's reader.
-COUNTED_TOPICS = (T.JOINT_COMMANDS,)
+#: Topics written by others (the controllers, the trajectory generator) whose readers'
+#: matched writers a ready answer counts: tick 0 waits until they have matched as many
+#: writers as the sim sees (its command reader's, the graph's reference writers).
+COUNTED_TOPICS = (T.JOINT_COMMANDS, T.REFERENCE)
 
 
 def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
