@@ -80,3 +80,20 @@ def test_a_forked_node_gets_sigterm_when_its_launcher_is_killed(tmp_path):
         if launcher.poll() is None:
             launcher.kill()
             launcher.wait()
+
+
+def test_the_fork_server_imports_no_ros_and_starts_no_thread():
+    """What the launcher's fork server preloads (cmd_graph.PRELOAD) must not import rclpy:
+    Fast DDS starts threads at load, which a forked node would lack."""
+    code = textwrap.dedent("""
+        import importlib, os, sys
+        from hexapod_bringup.cmd_graph import PRELOAD
+        before = len(os.listdir("/proc/self/task"))
+        for m in PRELOAD:
+            importlib.import_module(m)
+        print("rclpy" in sys.modules, len(os.listdir("/proc/self/task")) - before)
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "0"], r.stdout

@@ -91,7 +91,7 @@ RT_PRIORITY_NODES = RT_NODES + ("metrics", "markers", "foxglove_bridge")
 #: Wall s a node started in place of one that died by a signal waits after that death. A
 #: recorder forked 30-70 ms after its predecessor's SIGKILL stalled the graph's deliveries
 #: to the others (Fast DDS: 2 of 14 runs of the killed-recorder test; the predecessor still
-#: in the peers' view under the same node name); 1 s later, 0 of 8 (docs/benchmarks.md).
+#: in the peers' view under the same node name); 1 s later, 0 of 14 (docs/benchmarks.md).
 RESTART_PAUSE = 1.0
 #: Wall s between two looks at a running node's shared-memory locks once they are known
 #: (GraphProcesses.poll; the launcher's watch loop polls every 0.1 s).
@@ -159,12 +159,13 @@ class GraphProcesses:
         self.procs: dict[str, NodeProcess] = {}
         self._logs: dict[str, IO[bytes]] = {}
         self._started: set[str] = set()
-        self._killed_at: dict[str, float] = {}  # monotonic s: a node's death by a signal seen
         self._restart_ids = RESTART_PARTICIPANT_IDS
         self._locks: dict[str, list[Path]] = {}
         self._locks_due: dict[str, float] = {}  # monotonic s: next look at a node's locks
         self._fence = PortFence()
-        self._fenced: set[str] = set()
+        # name -> monotonic s its process was seen dead by a signal (its locks fenced); until
+        # a process of that name starts again
+        self._killed: dict[str, float] = {}
 
     def start(self, name: str, *overrides: str, node: str | None = None,
               nice: int | None = None, prefix: Sequence[str] = ()) -> NodeProcess:
@@ -190,9 +191,9 @@ class GraphProcesses:
         for o in self.overrides + overrides:
             ros_args += ["-p", o]
         env = self.env
-        pause = RESTART_PAUSE - (time.monotonic() - self._killed_at.pop(name, -RESTART_PAUSE))
-        if pause > 0:
-            time.sleep(pause)
+        killed = self._killed.pop(name, None)
+        if killed is not None:
+            time.sleep(max(0.0, RESTART_PAUSE - (time.monotonic() - killed)))
         if name in self._started and self._private is not None:
             # A restart: a participant id whose shared-memory ports do not exist (not the
             # previous process's, which may have died by SIGKILL: dds_profile.py). First
@@ -206,7 +207,6 @@ class GraphProcesses:
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
                        str(private_profile(self._private, participant_id=participant))}
         self._started.add(name)
-        self._fenced.discard(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log
         if self.fork and not prefix:
@@ -244,10 +244,8 @@ class GraphProcesses:
         return code
 
     def _ended(self, name: str, code: int) -> None:
-        if code < 0:
-            self._killed_at.setdefault(name, time.monotonic())
-        if code < 0 and name not in self._fenced:  # died by a signal: no goodbye to peers
-            self._fenced.add(name)
+        if code < 0 and name not in self._killed:  # died by a signal: no goodbye to peers
+            self._killed[name] = time.monotonic()
             self._fence.hold(self._locks.get(name, ()))  # keep new participants off its ids
         self._locks.pop(name, None)
         self._locks_due.pop(name, None)
