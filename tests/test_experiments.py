@@ -164,3 +164,51 @@ def test_memo_backend_runs_each_case_once_and_returns_what_a_rerun_gives():
     # another duration is another run
     run_cases(cases[:1], 1.5, memo)
     assert len(counting.ran) == 6
+
+
+def test_pool_spawns_while_another_thread_runs():
+    """A forked child would inherit the running thread's locks without the thread."""
+    import threading
+
+    from hexapod_bringup.core.parallel import pool_start_method
+
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert pool_start_method() == "spawn"
+    finally:
+        stop.set()
+        t.join()
+
+
+FORKED_POOL = """
+import json
+from hexapod_bringup.core.experiments import ground_sweep
+from hexapod_bringup.core.parallel import InlineBackend, ProcessBackend
+from hexapod_common.core.params import load_params
+
+if __name__ == "__main__":
+    p = load_params()
+    with ProcessBackend(2) as pool:
+        pool.start()
+        procs = ground_sweep(p, (20.0, 500.0), 170.0, backend=pool)
+        method = pool.start_method
+    inline = ground_sweep(p, (20.0, 500.0), 170.0, backend=InlineBackend())
+    print(json.dumps({"method": method, "same": procs.rows() == inline.rows()}))
+"""
+
+
+def test_pool_is_forked_from_a_threadless_command_and_agrees_with_inline(tmp_path):
+    """What `hexapod sweep` does: its pool starts before any other thread, so the workers
+    are forked (no new interpreter), and their numbers equal this process's."""
+    import json
+    import subprocess
+    import sys
+
+    script = tmp_path / "forked_pool.py"
+    script.write_text(FORKED_POOL)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == {"method": "fork", "same": True}

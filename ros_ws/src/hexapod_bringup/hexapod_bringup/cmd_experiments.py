@@ -69,12 +69,14 @@ def _backend(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     """The backend the options name; its workers stop when the command ends."""
     import atexit
 
-    from .core.parallel import make_backend
+    from .core.parallel import ProcessBackend, make_backend
 
     name = args.backend or ("dask" if args.dask else "processes")
     backend = make_backend(name, args.dask)
     if hasattr(backend, "close"):
         atexit.register(backend.close)
+    if isinstance(backend, ProcessBackend):
+        backend.start()  # before any progress bar's thread: its workers can then be forked
     return backend
 
 

@@ -80,17 +80,53 @@ def _single_threaded_worker() -> None:
     numba.set_num_threads(1)
 
 
+def _threads_running() -> bool:
+    """Whether this process runs another Python thread or has started numba's thread pool
+    (then a forked child would inherit locks and a pool without their threads)."""
+    import threading
+
+    import numba
+
+    if threading.active_count() > 1:
+        return True
+    try:
+        numba.threading_layer()  # type: ignore[attr-defined]  # ValueError until started
+    except ValueError:
+        return False
+    return True
+
+
+def pool_start_method() -> str:
+    """``fork`` while this process runs no other thread (the workers then start in
+    milliseconds with the engine already imported), else ``spawn`` (each worker a new
+    interpreter that imports the engine: ~0.7 s)."""
+    return "spawn" if _threads_running() else "fork"
+
+
 class ProcessBackend:
     """Local worker processes, one per core (each runs its chunk single-threaded).
 
-    The workers start on the first :meth:`map` and serve every later one (starting a worker
-    and loading the compiled engine costs seconds); :meth:`close` (or the end of a ``with``
-    block, or of the interpreter) stops them.
+    The workers start on :meth:`start` (or the first :meth:`map`) and serve every later one;
+    :meth:`close` (or the end of a ``with`` block, or of the interpreter) stops them. They
+    are forked from this process when it runs no other thread yet (:func:`pool_start_method`;
+    a command starts them before its progress bars), else spawned.
     """
 
     def __init__(self, workers: int | None = None) -> None:
         self.workers = workers or os.cpu_count() or 1
         self._pool: ProcessPoolExecutor | None = None
+        self.start_method: str | None = None
+
+    def start(self) -> "ProcessBackend":
+        """Start the workers now (idempotent)."""
+        if self._pool is None:
+            self.start_method = pool_start_method()
+            ctx = multiprocessing.get_context(self.start_method)
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=ctx,
+                                             initializer=_single_threaded_worker)
+            # a forking pool starts all its workers at the first submit
+            self._pool.submit(int).result()
+        return self
 
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
         for _, result in self.calls(evaluate_chunk, chunks):
@@ -98,11 +134,9 @@ class ProcessBackend:
 
     def calls(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, R]]:
         """(index, fn(item)) as the workers finish them."""
-        if self._pool is None:
-            ctx = multiprocessing.get_context("spawn")  # no fork of numba's thread pool
-            self._pool = ProcessPoolExecutor(self.workers, mp_context=ctx,
-                                             initializer=_single_threaded_worker)
-        futures = [self._pool.submit(_Indexed(fn), (k, x)) for k, x in enumerate(items)]
+        pool = self.start()._pool
+        assert pool is not None
+        futures = [pool.submit(_Indexed(fn), (k, x)) for k, x in enumerate(items)]
         try:
             for fut in as_completed(futures):
                 yield fut.result()
@@ -303,4 +337,5 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
 
 __all__ = ["BACKENDS", "Backend", "DaskBackend", "InlineBackend", "LOCAL_PREFIX",
            "MemoBackend", "ProcessBackend", "evaluate_chunk", "local_workers", "make_backend",
+           "pool_start_method",
            "run_cases"]

@@ -265,6 +265,9 @@ def register_controller_group(name: str, params_type: type, alias: str | None = 
     """Make ``name.*`` parameters (the fields of the dataclass ``params_type``, each with a
     :class:`Spec` in its metadata) known; ``alias``: a module:Class path naming the same
     controller."""
+    if _CONTROLLER_GROUPS.get(name) is params_type and (
+            not alias or _CONTROLLER_ALIASES.get(alias) == name):
+        return  # known already (every run loads its controllers: no spec table rebuild)
     for f in fields(params_type):
         if not isinstance(f.metadata.get("spec"), Spec):
             raise TypeError(f"controller {name!r}: parameter {f.name!r} of "
