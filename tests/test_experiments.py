@@ -212,3 +212,18 @@ def test_pool_is_forked_from_a_threadless_command_and_agrees_with_inline(tmp_pat
                          timeout=300)
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout.strip().splitlines()[-1]) == {"method": "fork", "same": True}
+
+
+def test_an_inline_chunk_gives_every_numba_thread_blocks_to_run():
+    """A chunk of 8 was one compiled block: `--backend inline` ran on one thread."""
+    import numba
+
+    from hexapod_bringup.core.parallel import CHUNK_CASES, chunk_size_of
+    from hexapod_control.core.batch_loop import block_plan
+
+    threads = numba.get_num_threads()
+    size = chunk_size_of(InlineBackend())
+    assert size == 2 * CHUNK_CASES * threads
+    assert chunk_size_of(MemoBackend(InlineBackend())) == size
+    assert chunk_size_of(ProcessBackend(2)) == CHUNK_CASES  # one thread per worker
+    assert len(block_plan(np.full(size, 2), threads)) >= 2 * threads

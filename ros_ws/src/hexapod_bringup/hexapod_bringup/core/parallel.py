@@ -61,8 +61,21 @@ def _single_threaded(job: tuple[Callable[[Any], Any], Any]) -> Any:
     return fn(item)
 
 
+#: Cases per chunk sent to a worker (one compiled block on its one thread; small enough
+#: that the two workers end together and progress bars move).
+CHUNK_CASES = 8
+
+
 class InlineBackend:
     """This process; numba's threads run the cases of a chunk in parallel."""
+
+    @property
+    def chunk_size(self) -> int:
+        """Cases per chunk: two blocks of :data:`CHUNK_CASES` for each of numba's threads
+        (with chunks of 8, a chunk was one block and ran on one thread)."""
+        import numba
+
+        return 2 * CHUNK_CASES * numba.get_num_threads()
 
     def map(self, chunks: Sequence[Chunk]) -> Iterator[tuple[int, list[Outcome]]]:
         for chunk in chunks:
@@ -270,6 +283,7 @@ class MemoBackend:
 
     def __init__(self, inner: Backend) -> None:
         self.inner = inner
+        self.chunk_size = chunk_size_of(inner)
         self.known: dict[tuple[Case, float], Outcome] = {}
         #: runs taken from memory instead of being run again
         self.reused = 0
@@ -308,14 +322,23 @@ class MemoBackend:
         return self.inner.calls(fn, items)
 
 
+def chunk_size_of(backend: object) -> int:
+    """Cases per chunk on ``backend``: its own ``chunk_size`` if it has one, else
+    :data:`CHUNK_CASES`."""
+    return int(getattr(backend, "chunk_size", CHUNK_CASES))
+
+
 def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
-              chunk_size: int = 8,
+              chunk_size: int | None = None,
               progress: Callable[[int], None] | None = None) -> list[Outcome]:
     """Evaluate every case on ``backend``; results in the order of ``cases``.
 
-    Cases are grouped into chunks that share a reference trajectory (same robot, gait and
-    control period). ``progress(n)`` is called with the number of cases finished in each chunk.
+    Cases are grouped into chunks (of ``chunk_size``, default :func:`chunk_size_of` the
+    backend) that share a reference trajectory (same robot, gait and control period).
+    ``progress(n)`` is called with the number of cases finished in each chunk.
     """
+    if chunk_size is None:
+        chunk_size = chunk_size_of(backend)
     groups: dict[tuple[object, ...], list[int]] = {}
     for k, c in enumerate(cases):
         groups.setdefault(shared_reference_key(c.params), []).append(k)
@@ -335,7 +358,6 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
     return [r for r in results if r is not None]
 
 
-__all__ = ["BACKENDS", "Backend", "DaskBackend", "InlineBackend", "LOCAL_PREFIX",
-           "MemoBackend", "ProcessBackend", "evaluate_chunk", "local_workers", "make_backend",
-           "pool_start_method",
-           "run_cases"]
+__all__ = ["BACKENDS", "Backend", "CHUNK_CASES", "DaskBackend", "InlineBackend",
+           "LOCAL_PREFIX", "MemoBackend", "ProcessBackend", "chunk_size_of", "evaluate_chunk",
+           "local_workers", "make_backend", "pool_start_method", "run_cases"]
