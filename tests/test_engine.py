@@ -122,3 +122,19 @@ def test_walks_forward_at_commanded_speed():
     p = load_params()
     idx = simulate(p, "pd_pf").indices
     assert idx.L == pytest.approx(p.gait.velocity * p.cycle_time, rel=0.1)
+
+
+def test_batches_share_one_reference_that_no_result_can_change():
+    """Chunks of a sweep reuse the batch reference (closed_loop.batch_reference); a result
+    hands out read-only views, so no caller can alter the next batch's reference."""
+    from hexapod_common.core.gait import reference
+    from hexapod_control.core.closed_loop import run_batch
+
+    p = load_params()
+    first = run_batch([Case(p, "pd_p")], 1.0, 0.5)
+    with pytest.raises(ValueError):
+        first.reference.theta[0, 0, 0] = 0.0
+    second = run_batch([Case(p.with_values(**{"ground.scale": 2.0}), "pd_pf")], 1.0, 0.5)
+    fresh = reference(p, second.t)
+    for name in ("hip", "foot", "theta", "theta_vel"):
+        assert np.array_equal(getattr(second.reference, name), getattr(fresh, name))

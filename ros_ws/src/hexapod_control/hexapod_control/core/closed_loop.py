@@ -361,8 +361,14 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
         sub_ok = np.zeros(len(fast), dtype=np.bool_)
         _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, sub_obs, sub_ok)
         obs[fast], ok[fast] = sub_obs, sub_ok
-    window_ref = Reference(*(a[k_a:] for a in ref))
+    window_ref = Reference(*(_read_only(a[k_a:]) for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
+
+
+def _read_only(view: np.ndarray) -> np.ndarray:
+    """``view`` (of a kept reference array) made read-only: the result cannot change it."""
+    view.flags.writeable = False
+    return view
 
 
 #: The last few batches' reference trajectories, by (shared_reference_key, ticks): every
@@ -373,7 +379,8 @@ _BATCH_REFERENCES: dict[tuple[object, ...], Reference] = {}
 def batch_reference(p: HexapodParams, n: int) -> Reference:
     """The reference at control ticks 0..n of ``p``, kept per :func:`shared_reference_key`
     and ``n``: shared, so callers must not write into its arrays (they stay writable only
-    because the compiled kernels are typed for writable arrays)."""
+    because the compiled kernels are typed for writable arrays; :func:`run_batch` hands out
+    read-only views)."""
     key = (shared_reference_key(p), n)
     ref = _BATCH_REFERENCES.get(key)
     if ref is None:
