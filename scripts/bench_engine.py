@@ -134,36 +134,40 @@ def sweep_cases(p: HexapodParams, n_scales: int) -> list[Case]:
             for c in ("pd_p", "pd_pf") for s in scales]
 
 
-def bench_s2(p: HexapodParams, n_scales: int, duration: float, reps: int,
-             one_thread: bool) -> dict[str, Any]:
-    """Summed simulated s / wall s of run_batch over the sweep (recording the last cycle);
-    with ``one_thread`` also one repetition on a single numba thread (parallel scaling)."""
-    cases = sweep_cases(p, n_scales)
+def bench_batch(cases: list[Case], duration: float, reps: int) -> dict[str, Any]:
+    """Summed simulated s / wall s (and / CPU s of the process) of ``reps`` runs of
+    run_batch over ``cases`` (recording the last cycle), after a two-case warm-up."""
+    p = cases[0].params
     record_from = max(0.0, duration - p.cycle_time)
     run_batch(cases[:2], 10 * p.sim.control_period, 0.0)  # warm-up: load or compile
-
-    def once() -> tuple[float, float, int]:
+    rates, cpu_rates, ok = [], [], 0
+    for _ in range(reps):
         t, c = time.perf_counter(), time.process_time()
         res = run_batch(cases, duration, record_from)
         cpu, wall = time.process_time() - c, time.perf_counter() - t
         sim = len(cases) * duration
-        return sim / wall, sim / cpu, int(res.ok.sum())
+        rates.append(sim / wall)
+        cpu_rates.append(sim / cpu)
+        ok = int(res.ok.sum())
+    return {"cases": len(cases), "duration": duration, "ok": ok, "rates": rates,
+            "cpu_rates": cpu_rates}
 
+
+def bench_s2(p: HexapodParams, n_scales: int, duration: float, reps: int,
+             one_thread: bool) -> dict[str, Any]:
+    """:func:`bench_batch` over S2's sweep (:func:`sweep_cases`); with ``one_thread`` also
+    one repetition on a single numba thread (parallel scaling)."""
+    cases = sweep_cases(p, n_scales)
+    out = bench_batch(cases, duration, reps)
     threads = numba.get_num_threads()
-    rates, cpu_rates, ok = [], [], 0
-    for _ in range(reps):
-        rate, cpu_rate, ok = once()
-        rates.append(rate)
-        cpu_rates.append(cpu_rate)
     single = None
     if one_thread and threads > 1:
         numba.set_num_threads(1)
         try:
-            single = once()[0]
+            single = bench_batch(cases, duration, 1)["rates"][0]
         finally:
             numba.set_num_threads(threads)
-    return {"cases": len(cases), "duration": duration, "ok": ok, "rates": rates,
-            "cpu_rates": cpu_rates, "one_thread_rate": single, "threads": threads,
+    return {**out, "one_thread_rate": single, "threads": threads,
             "layer": numba.threading_layer()}
 
 

@@ -82,6 +82,14 @@ class SweepResult:
         return out
 
 
+def sweep_cases(base: HexapodParams, variable: str, values: Sequence[float],
+                controllers: Sequence[str] = CONTROLLERS) -> list[Case]:
+    """The cases of a sweep: every controller (outer) at every value of ``variable`` (a
+    dotted parameter name) on ``base``."""
+    return [Case(base.with_values(**{variable: float(v)}), c)
+            for c in controllers for v in values]
+
+
 def sweep(p: HexapodParams, variable: str, values: Sequence[float],
           controllers: Sequence[str] = CONTROLLERS, duration: float | None = None,
           backend: Backend | None = None, progress: Progress | None = None,
@@ -95,8 +103,7 @@ def sweep(p: HexapodParams, variable: str, values: Sequence[float],
     fixed_dotted = {k.replace("__", "."): v for k, v in fixed.items()}
     base = p.with_values(**fixed_dotted) if fixed_dotted else p
     duration = base.run.duration if duration is None else duration
-    cases = [Case(base.with_values(**{variable: float(v)}), c)
-             for c in controllers for v in values]
+    cases = sweep_cases(base, variable, values, controllers)
     n = len(values)
     conv: dict[str, list[Convergence]] | None = None
     if check:
@@ -296,4 +303,5 @@ def tune(p: HexapodParams, controller: str, grid: Mapping[str, Sequence[float]] 
 
 __all__ = ["DEFAULT_FACTORS", "GAIN_NAMES", "RATES_HZ", "RateResult", "SweepResult",
            "TuneResult", "control_period_of", "default_grid", "ground_sweep", "hip_score",
-           "rate_experiment", "select_best", "sweep", "t_max_sweep", "tune", "walking"]
+           "rate_experiment", "select_best", "sweep", "sweep_cases", "t_max_sweep", "tune",
+           "walking"]
