@@ -3,8 +3,8 @@
 
 Per round:
   batched  one process runs ``closed_loop.run_batch`` on the sweep's cases in one batch
-           (numba's threads on every core; a warm-up batch first, as S2 does), and on S2's
-           own case set (bench_engine.py: 25-200 % ground, 2 x 64 cases);
+           (numba's threads on every core), then S2's own case set (25-200 % ground,
+           2 x 64 cases); both timed by bench_engine.py's S2 code (bench_batch);
   sweep    ``hexapod sweep ground --range R --t-max-list T`` (the user's command: progress
            off, its CSV, JSON and seven figures written), wall time;
   start    ``hexapod sweep --help`` (interpreter and command-line start-up), subtracted.
@@ -24,63 +24,93 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
+from typing import Callable
 
 from project_env import reexec_in_env
 
 BATCHED = r"""
-import json, sys, time
-import numpy as np
+import json, sys
+sys.path.insert(0, sys.argv[3])
+from bench_engine import bench_batch, bench_s2
 from hexapod_bringup.cli_args import parse_range
-from hexapod_bringup.core.simulate import window_ticks
+from hexapod_bringup.core.experiments import sweep_cases
 from hexapod_common.core.params import load_params
-from hexapod_control.core.closed_loop import Case, run_batch
-rng, t_max, controllers = sys.argv[1], float(sys.argv[2]), ("pd_p", "pd_pf")
-p = load_params(None).with_values(**{"actuator.t_max": t_max})
+rng, t_max = sys.argv[1], float(sys.argv[2])
+p = load_params(None)
 d = p.run.duration
-k_a, _ = window_ticks(p, d)
-rec = k_a * p.sim.control_period
-user = [Case(p.with_values(**{"ground.scale": v / 100}), c)
-        for c in controllers for v in parse_range(rng)]
-s2 = [Case(load_params(None).with_values(**{"ground.scale": float(s)}), c)
-      for c in controllers for s in np.linspace(0.25, 2.0, 64)]
-run_batch(user[:2], 10 * p.sim.control_period, 0.0)  # warm-up: load the kernels
-out = {"duration": d, "cases": len(user)}
-for name, cases in (("user", user), ("s2", s2)):
-    t = time.perf_counter()
-    run_batch(cases, d, rec)
-    out[name] = len(cases) * d / (time.perf_counter() - t)
-print(json.dumps(out))
+user = sweep_cases(p.with_values(**{"actuator.t_max": t_max}), "ground.scale",
+                   [v / 100 for v in parse_range(rng)], ("pd_p", "pd_pf"))
+print(json.dumps({"duration": d, "cases": len(user),
+                  "user": bench_batch(user, d, 1)["rates"][0],
+                  "s2": bench_s2(p, 64, d, 1, False)["rates"][0]}))
 """
 
 
-def timed(cmd: list[str]) -> float:
-    """Wall seconds of a command (its output discarded; a failure stops the benchmark)."""
+class StepFailed(Exception):
+    """A command of the benchmark failed: its name, exit code and last line of stderr."""
+
+
+def step(what: str, cmd: list[str]) -> tuple[float, str]:
+    """Wall seconds and stdout of command ``cmd`` (StepFailed names ``what``)."""
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        tail = res.stderr.strip().splitlines()[-1:] or ["no message"]
+        raise StepFailed(f"{what} failed (exit {res.returncode}): {tail[0]}")
+    return time.perf_counter() - t, res.stdout
 
 
 def main() -> int:
     reexec_in_env(__file__)
+    from hexapod_bringup.cli_args import number, value_range
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--runs", type=int, default=3, help="rounds (medians are quoted)")
-    ap.add_argument("--range", default="10:1000:128", help="the sweep's --range")
-    ap.add_argument("--t-max-list", default="400", help="the sweep's --t-max-list (one value)")
+    ap.add_argument("--runs", type=rounds, default=3, help="rounds (medians are quoted)")
+    ap.add_argument("--range", type=checked(value_range), default="10:1000:128",
+                    help="the sweep's --range (ground in %%)")
+    ap.add_argument("--t-max-list", type=checked(number(0.0, lo_open=True, what="T_max")),
+                    default="400", help="the sweep's --t-max-list (one value, N m)")
     args = ap.parse_args()
+    try:
+        return bench(args)
+    except StepFailed as err:
+        print(f"bench_sweep: {err}", file=sys.stderr)
+        return 1
+
+
+def rounds(text: str) -> int:
+    """argparse type: a whole number of rounds >= 1."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return int(text)
+
+
+def checked(convert: Callable[[str], object]) -> Callable[[str], str]:
+    """argparse type: ``text`` unchanged once ``convert`` (which raises) accepts it."""
+    def check(text: str) -> str:
+        convert(text)
+        return text
+    return check
+
+
+def bench(args: argparse.Namespace) -> int:
+    """The rounds and the summary."""
     cli = [sys.executable, "-m", "hexapod_bringup.cli"]
     rows: dict[str, list[float]] = {"user": [], "s2": [], "sweep": [], "start": []}
     info: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as out:
         for r in range(args.runs):
-            res = subprocess.run([sys.executable, "-c", BATCHED, args.range, args.t_max_list],
-                                 check=True, capture_output=True, text=True)
-            info = json.loads(res.stdout.strip().splitlines()[-1])
+            _, out_text = step("the batched engine's run", [
+                sys.executable, "-c", BATCHED, args.range, args.t_max_list,
+                str(Path(__file__).resolve().parent)])
+            info = json.loads(out_text.strip().splitlines()[-1])
             rows["user"].append(info["user"])
             rows["s2"].append(info["s2"])
-            rows["sweep"].append(timed(cli + ["sweep", "ground", "--range", args.range,
-                                              "--t-max-list", args.t_max_list,
-                                              "--no-progress", "--out", out]))
-            rows["start"].append(timed(cli + ["sweep", "--help"]))
+            rows["sweep"].append(step("hexapod sweep", cli + [
+                "sweep", "ground", "--range", args.range, "--t-max-list", args.t_max_list,
+                "--no-progress", "--out", out])[0])
+            rows["start"].append(step("hexapod sweep --help", cli + ["sweep", "--help"])[0])
             print(f"round {r + 1}: batched {info['user']:.0f} sim s/s (S2's cases "
                   f"{info['s2']:.0f}), sweep {rows['sweep'][-1]:.2f} s, start-up "
                   f"{rows['start'][-1]:.2f} s", flush=True)

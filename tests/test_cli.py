@@ -48,3 +48,27 @@ def test_simulate_says_where_a_live_change_falls_against_the_indices_window(hexa
     assert r.returncode == 0, r.stderr
     assert "window = [2, 3] s" in r.stdout
     assert f"parameter change: ground.scale = 2.0 at {at} s ({where}" in r.stdout
+
+
+@pytest.mark.parametrize("args, code, message", [
+    (["--runs", "0"], 2, "argument --runs: expected a whole number >= 1"),
+    (["--range", "10:x:3"], 2, "argument --range: '10:x:3' is not"),
+    (["--t-max-list", "-5"], 2, "argument --t-max-list: '-5' is not T_max"),
+    (["--range", "0,100", "--runs", "1"], 1,
+     "the batched engine's run failed (exit 1): hexapod_common.core.errors.ParameterError: "
+     "parameter 'ground.scale' = 0.0 is invalid"),
+])
+def test_bench_sweep_refuses_bad_options_in_one_line(args, code, message):
+    """scripts/bench_sweep.py: a bad option, or a sweep the engine refuses, is one line and
+    a non-zero exit before any figure is printed."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "bench_sweep.py"
+    out = subprocess.run([sys.executable, str(script), *args], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == code
+    lines = out.stderr.strip().splitlines()
+    assert message in lines[-1] and "Traceback" not in out.stderr
+    assert "medians" not in out.stdout
