@@ -323,6 +323,12 @@ class SimNode(Node):
             if state != "active":
                 self.log.warning(f"{name} is {state}: it answers only once active")
 
+    def _joined_in_charge(self) -> bool:
+        """Whether the controller in charge is a joined node (not the engine's) of
+        ``wait_for``."""
+        return (node_of(self.ticks.in_charge) in self.wait_for
+                and self.ticks.in_charge not in engine_names())
+
     def _wait_inputs_matched(self) -> None:
         """Wait (at most INPUTS_TIMEOUT s) until every node of ``wait_for`` that reads this
         node's per-tick topics says its readers have matched our writers on its side
@@ -339,6 +345,10 @@ class SimNode(Node):
         waiting = {n: "no answer" for n in names}
         asked: dict[str, Any] = {}
         next_ask = dict.fromkeys(names, 0.0)  # monotonic s: not asked again before
+        # A joined controller in charge at tick 0 (waited for) writes commands from its start:
+        # its writer counts even before this node's command reader has matched it (else a
+        # recorder that had not matched it either passed, and lost its first ~30 commands).
+        commander = int(self._joined_in_charge())
 
         def ready() -> bool:
             now = time.monotonic()
@@ -360,7 +370,8 @@ class SimNode(Node):
                         waiting[name] = "its answers are not authentic (dropped)"
                     elif res.success:
                         short = inputs_matched.behind(
-                            text, {T.JOINT_COMMANDS: self.cmd_sub.get_publisher_count(),
+                            text, {T.JOINT_COMMANDS: max(commander,
+                                                         self.cmd_sub.get_publisher_count()),
                                    T.REFERENCE: self.count_publishers(T.REFERENCE)})
                         if short:
                             waiting[name] = short
@@ -398,8 +409,7 @@ class SimNode(Node):
             self._wait_inputs_matched()
             if self.loop.stopped:
                 return
-            if node_of(self.ticks.in_charge) in self.wait_for and \
-                    self.ticks.in_charge not in engine_names():
+            if self._joined_in_charge():
                 # A joined controller in charge has no inputs_matched service: give its
                 # readers the time our side took to match ours, so tick 0 is not lost to it.
                 self.loop.spin(until=lambda: False, timeout=JOINED_MATCH_WAIT)
