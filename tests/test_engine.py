@@ -138,3 +138,32 @@ def test_batches_share_one_reference_that_no_result_can_change():
     fresh = reference(p, second.t)
     for name in ("hip", "foot", "theta", "theta_vel"):
         assert np.array_equal(getattr(second.reference, name), getattr(fresh, name))
+
+
+def test_scoring_on_the_fly_equals_recording_then_scoring_bit_for_bit():
+    """A sweep scores its cases inside the compiled batch (closed_loop.score_batch) instead
+    of recording the window: the sums are those of the recorded samples, to the last bit,
+    for compiled laws, the drive, a plug-in law run one by one and a diverging case."""
+    from hexapod_bringup.core.simulate import window_ticks
+    from hexapod_control.core.closed_loop import run_batch, score_batch
+    from hexapod_metrics.core.indices import sums_from_accumulator, sums_from_obs
+
+    p = load_params(**{"sim.control_period": 0.001})
+    cases = [Case(p, "pd_p"), Case(p.with_values(**{"ground.scale": 0.2}), "pd_pf"),
+             Case(p.with_values(**{"pd_pf.force_loop": "drive"}), "pd_pf"),
+             Case(p, "pd_alpha"), Case(p.with_values(**{"body.k_x": 1e11}), "pd_p")]
+    k_a, k_b = window_ticks(p, 3.0)
+    dt = p.sim.control_period
+    scored = score_batch(cases, 3.0, (k_a, k_b))
+    recorded = run_batch(cases, 3.0, k_a * dt)
+    assert scored.window == (k_a * dt, k_b * dt)
+    assert list(scored.ok) == list(recorded.ok) == [True, True, True, True, False]
+    m = k_b - k_a + 1
+    for acc, obs in zip(scored.sums[:4], recorded.obs[:4]):
+        on_the_fly = sums_from_accumulator(acc, dt)
+        offline = sums_from_obs(obs[:m], recorded.reference.hip[:m],
+                                recorded.reference.foot[:m], dt)
+        assert on_the_fly.indices() == offline.indices()
+        assert np.array_equal(on_the_fly.sq_err, offline.sq_err)
+    with pytest.raises(Exception, match="window"):
+        score_batch(cases[:1], 3.0, (k_b, k_a))

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from hexapod_metrics.core.indices import compute_indices, evaluation_window
+from hexapod_metrics.core.indices import compute_indices, evaluation_window, window_sums
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import load_params
 
@@ -109,3 +109,22 @@ def test_hip_lag_and_its_growth_tell_drift_from_tracking():
     assert np.isnan(lag_growth(None, idx[0]))
     both = (cycles[0] + cycles[1]).indices()               # sums add over windows
     assert both.lag_xH == pytest.approx(0.016)
+
+
+def test_compiled_sums_equal_the_plain_numpy_sums():
+    """The one compiled accumulator (index_sums, shared with the batched engine) against the
+    equations written out in numpy, on random samples."""
+    rng = np.random.default_rng(7)
+    tq, w, f, hp, hr, fp, fr = (rng.normal(size=(501, 6, 2)) for _ in range(7))
+    dt = 1e-3
+    s = window_sums(tq, w, f, hp, hr, fp, fr, dt)
+    eh, ef = hr[1:] - hp[1:], fr[1:] - fp[1:]
+    assert s.energy == pytest.approx(np.sum(np.abs(tq[1:] * w[1:])) * dt, rel=1e-12)
+    assert s.torque2 == pytest.approx(np.sum(tq[1:] ** 2) * dt, rel=1e-12)
+    assert s.force2 == pytest.approx(np.sum(f[1:] ** 2) * dt, rel=1e-12)
+    sq = np.stack([np.sum(eh[..., 0] ** 2, 0), np.sum(eh[..., 1] ** 2, 0),
+                   np.sum(ef[..., 0] ** 2, 0), np.sum(ef[..., 1] ** 2, 0)])
+    assert np.allclose(s.sq_err, sq, rtol=1e-12, atol=0)
+    assert s.samples == 500
+    assert s.distance == np.mean(hp[-1, :, 0] - hp[0, :, 0])
+    assert s.lag == pytest.approx(np.sum(eh[..., 0]), rel=1e-9)

@@ -15,6 +15,9 @@ from .core.experiments import SweepResult
 from hexapod_metrics.core.indices import INDEX_UNITS
 
 LABELS = {"pd_p": "PD-P", "pd_pf": "PD-P&F", "pd_alpha": "PD^α"}
+#: PNG encoding for figures drawn by the dozen (sweeps): zlib level 1 instead of 6, ~10 ms
+#: less per figure for files ~15 % larger
+PNG_FAST = {"compress_level": 1}
 STYLES = {"pd_p": dict(color="tab:blue"), "pd_pf": dict(color="tab:red"),
           "pd_alpha": dict(color="tab:green")}
 
@@ -153,8 +156,12 @@ def sweep_plot(res: SweepResult, names: Sequence[str], path: Path, title: str,
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     fig.suptitle(title + ("" if res.checked else " (not checked for dt convergence)"))
-    fig.tight_layout()
-    fig.savefig(path)
+    # fixed margins (room for 7-character tick labels) rather than tight_layout, whose
+    # extra text-measuring pass was a quarter of a sweep figure's time
+    width = 5.2 * len(names)  # inches
+    fig.subplots_adjust(left=0.8 / width, right=1.0 - 0.15 / width, bottom=0.15, top=0.88,
+                        wspace=0.35)
+    fig.savefig(path, pil_kwargs=PNG_FAST)
     plt.close(fig)
     return path
 

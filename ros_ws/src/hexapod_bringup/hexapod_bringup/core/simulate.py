@@ -10,13 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
-import numpy as np
-
-from hexapod_control.core.closed_loop import Case, RunResult, run, run_batch, tick_count
+from hexapod_control.core.closed_loop import Case, RunResult, run, score_batch, tick_count
 from hexapod_common.core.params import HexapodParams
 from hexapod_sim.core.uneven_ground import GroundDraws
 
-from hexapod_metrics.core.indices import Indices, evaluation_window, indices_from_obs
+from hexapod_metrics.core.indices import (Indices, evaluation_window, indices_from_obs,
+                                         sums_from_accumulator)
 
 
 @dataclass(frozen=True)
@@ -80,21 +79,17 @@ def simulate(p: HexapodParams, controller: str | None = None, duration: float | 
 
 
 def evaluate_batch(cases: Sequence[Case], duration: float) -> list[Outcome]:
-    """Run cases in parallel (one compiled batch) and score each over its window."""
+    """Run cases in parallel (one compiled batch) and score each over its window, on the fly
+    (closed_loop.score_batch: the same sums as recording the window and scoring it)."""
     p0 = cases[0].params
-    k_a, k_b = window_ticks(p0, duration)
+    res = score_batch(cases, duration, window_ticks(p0, duration))
     dt = p0.sim.control_period
-    res = run_batch(cases, duration, k_a * dt)
-    m = k_b - k_a + 1
-    ref = res.reference
     out = []
-    for c, obs, ok in zip(res.cases, res.obs, res.ok):
-        window = (float(res.t[0]), float(res.t[m - 1]))
-        if not ok or not np.all(np.isfinite(obs[:m])):
-            out.append(Outcome(c, None, window, "diverged"))
+    for c, acc, ok in zip(res.cases, res.sums, res.ok):
+        if not ok:
+            out.append(Outcome(c, None, res.window, "diverged"))
             continue
-        idx = indices_from_obs(obs[:m], ref.hip[:m], ref.foot[:m], dt)
-        out.append(Outcome(c, idx, window, "ok"))
+        out.append(Outcome(c, sums_from_accumulator(acc, dt).indices(), res.window, "ok"))
     return out
 
 

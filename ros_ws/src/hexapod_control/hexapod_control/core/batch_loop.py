@@ -6,7 +6,9 @@ observe (state part shared with the first physics step), control law, saturation
 ``substeps`` physics steps. Columns of code PD_PF_DRIVE (PD-P&F with its force loop in the
 drive) get their torque at every physics step from the drive law instead
 (hexapod_sim.core.drive, same arithmetic), with the foot force at the step's start under
-the previous step's torque. A case that diverges leaves its block at once (its column is
+the previous step's torque. Each case's evaluation window is recorded sample by sample or
+scored on the fly (hexapod_common.core.index_sums, the sums the analysis adds up too). A case
+that diverges leaves its block at once (its column is
 swapped behind the active ones), so it costs the others nothing. Blocks run in parallel
 (numba ``prange``, one block per thread at a time).
 """
@@ -20,7 +22,9 @@ from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepar
                                             block_scratch, block_solve, swap_columns)
 from hexapod_sim.core.engine import state_ok
 from hexapod_common.core.kinematics import foot_force_torque
-from hexapod_common.core.layout import P_DT, P_L1, P_L2, P_TMAX, Q0, V0
+from hexapod_common.core.index_sums import add_sample, start_window
+from hexapod_common.core.layout import (O_FP, O_HF, O_HP, O_THV, O_TQ, P_DT, P_L1, P_L2,
+                                        P_TMAX, Q0, V0)
 from hexapod_common.core.params import N_LEGS
 
 from .controllers import PD_PF_DRIVE, leg_demand
@@ -67,18 +71,31 @@ def drive_columns(X, PT, G, codes, n, TQ, FF, theta_d, theta_vel_d, step):  # ty
                 TQ[2 * i + j, b] = clip_torque(v, PT[P_TMAX, b])
 
 
+@njit(cache=True)
+def _all_finite(a):  # type: ignore[no-untyped-def]
+    """True if every value of the contiguous array ``a`` is finite (no temporary array)."""
+    for v in a.flat:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
 @njit(cache=True, error_model="numpy")
 def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  # type: ignore[no-untyped-def]
-              obs_out, cols, ok):
+              obs_out, cols, ok, score_end, hip_ref, foot_ref, acc_out, finite):
     """Run columns 0..n-1 of a block for len(theta_d) ticks from torque zero.
 
     X (STATE_SIZE, B) states, PT (MODEL_SIZE, B) model vectors, codes (B,) controller codes,
     G (5, B) gains, cols (B,) the case index of each column; B = batch_physics.LANES.
     Records the sample of tick k
     into obs_out[case, k - rec_offset] when that row exists (the tick after the last too),
-    and sets ok[case].
+    and sets ok[case]. Scores ticks rec_offset..score_end (none if score_end < rec_offset)
+    into acc_out[case] (index_sums: row rec_offset starts the window, the later ones are
+    added against the references hip_ref[k], foot_ref[k] (6, 2)) and clears finite[case]
+    if any value of a scored sample is not finite.
     """
     FH, WK, FF, QDD, TR, FLAG = block_scratch()
+    sample = np.empty((9, N_LEGS, 2))
     TQ = np.zeros((2 * N_LEGS, LANES))
     n_ticks = theta_d.shape[0]
     n_rec = obs_out.shape[1]
@@ -93,6 +110,17 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
         if 0 <= r < n_rec:
             for b in range(n):
                 block_sample(X, TQ, PT, b, FH, WK, FF, QDD, obs_out[cols[b], r])
+        if rec_offset <= k <= score_end:
+            for b in range(n):
+                c = cols[b]
+                block_sample(X, TQ, PT, b, FH, WK, FF, QDD, sample)
+                if k == rec_offset:
+                    start_window(acc_out[c], sample[O_HP])
+                else:
+                    add_sample(acc_out[c], sample[O_TQ], sample[O_THV], sample[O_HF],
+                               sample[O_HP], hip_ref[k], sample[O_FP], foot_ref[k])
+                if not _all_finite(sample):
+                    finite[c] = False
         if k == n_ticks:
             break
         for i in range(N_LEGS):
@@ -133,12 +161,13 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
 
 @njit(cache=True, parallel=True)
 def run_blocks(Xs, PTs, codes, Gs, counts, theta_d, theta_vel_d, substeps, rec_offset,  # type: ignore[no-untyped-def]
-               obs_out, cols, ok):
+               obs_out, cols, ok, score_end, hip_ref, foot_ref, acc_out, finite):
     """:func:`run_block` for every block (leading axis of Xs, PTs, codes, Gs, cols; counts
     and substeps per block), in parallel."""
     for j in prange(Xs.shape[0]):
         run_block(Xs[j], PTs[j], codes[j], Gs[j], counts[j], theta_d, theta_vel_d,
-                  substeps[j], rec_offset, obs_out, cols[j], ok)
+                  substeps[j], rec_offset, obs_out, cols[j], ok, score_end, hip_ref,
+                  foot_ref, acc_out, finite)
 
 
 def block_plan(substeps: np.ndarray, threads: int) -> list[np.ndarray]:

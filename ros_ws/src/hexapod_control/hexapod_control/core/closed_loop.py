@@ -34,8 +34,9 @@ from hexapod_sim.core.engine import (advance_prepared, initial_state, observe, o
                                      scratch)
 from hexapod_sim.core.uneven_ground import GroundDraws, GroundRecord, touchdowns
 from hexapod_common.core.gait import Reference, reference
-from hexapod_common.core.layout import (OBS_SHAPE, P_L1, P_L2,
-                                        P_TMAX, model_vector)
+from hexapod_common.core.index_sums import ACC_SIZE, accumulate
+from hexapod_common.core.layout import (O_FP, O_HF, O_HP, O_THV, O_TQ, OBS_SHAPE, P_L1,
+                                        P_L2, P_TMAX, model_vector)
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.params import (N_LEGS, HexapodParams, check_controller,
                                         controller_group, controller_names)
@@ -323,15 +324,10 @@ def shared_reference_key(p: HexapodParams) -> tuple[object, ...]:
     return (p.robot, p.gait, p.sim.control_period)
 
 
-def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> BatchResult:
-    """Run every case for ``duration`` s in parallel; keep the ticks from ``record_from`` s on.
-
-    All cases must share robot geometry, gait and control period (they differ in ground,
-    actuator, body, gains and physics step ``sim.dt``), so that they share one reference
-    trajectory at the control ticks.
-    """
+def _batch_ticks(cases: Sequence[Case], duration: float) -> int:
+    """Ticks of a batch of ``duration`` s, after checking its cases share one reference."""
     if not cases:
-        raise ValueError("run_batch needs at least one case")
+        raise ValueError("a batch needs at least one case")
     p0 = cases[0].params
     key = shared_reference_key(p0)
     for c in cases:
@@ -339,7 +335,18 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
             raise ParameterError("gait", "differs between cases",
                                  "one robot, gait and control period per batch (split the "
                                  "batch)")
-    n = tick_count(p0, duration)
+    return tick_count(p0, duration)
+
+
+def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> BatchResult:
+    """Run every case for ``duration`` s in parallel; keep the ticks from ``record_from`` s on.
+
+    All cases must share robot geometry, gait and control period (they differ in ground,
+    actuator, body, gains and physics step ``sim.dt``), so that they share one reference
+    trajectory at the control ticks.
+    """
+    n = _batch_ticks(cases, duration)
+    p0 = cases[0].params
     k_a = int(math.floor(record_from / p0.sim.control_period + 1e-9))
     if not 0 <= k_a <= n:
         raise ParameterError("record_from", record_from, f"a time in [0, {duration:g}] s")
@@ -354,15 +361,65 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
             obs[j] = r.obs[k_a:]
             ok[j] = r.diverged_at is None
     fast = [j for j, f in enumerate(compiled) if f]
+    no_sums, no_flags = np.zeros((0, ACC_SIZE)), np.zeros(0, dtype=np.bool_)
     if len(fast) == len(cases):  # the usual batch: the kernel writes straight into obs
-        _run_compiled_batch(cases, ref, n, k_a, obs, ok)
+        _run_compiled_batch(cases, ref, n, k_a, obs, ok, -1, no_sums, no_flags)
     elif fast:
         sub_obs = np.full((len(fast),) + obs.shape[1:], np.nan)
         sub_ok = np.zeros(len(fast), dtype=np.bool_)
-        _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, sub_obs, sub_ok)
+        _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, sub_obs, sub_ok, -1,
+                            no_sums, no_flags)
         obs[fast], ok[fast] = sub_obs, sub_ok
     window_ref = Reference(*(_read_only(a[k_a:]) for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
+
+
+@dataclass(frozen=True)
+class ScoredBatch:
+    """The index sums of ticks k_a..k_b of every case (``sums`` (cases, ACC_SIZE): the
+    accumulators of hexapod_common.core.index_sums) and which cases finished without
+    diverging with every value of those samples finite (``ok``); ``window`` (t_a, t_b) s."""
+
+    cases: tuple[Case, ...]
+    window: tuple[float, float]
+    sums: np.ndarray
+    ok: np.ndarray
+
+
+def score_batch(cases: Sequence[Case], duration: float, window: tuple[int, int]
+                ) -> ScoredBatch:
+    """Run every case for ``duration`` s in parallel and score ticks ``window`` = (k_a, k_b)
+    on the fly, without recording them: what a sweep needs of a run (the sums are those of
+    the same samples recorded, to the last bit). Cases as for :func:`run_batch`."""
+    n = _batch_ticks(cases, duration)
+    k_a, k_b = window
+    if not 0 <= k_a < k_b <= n:
+        raise ParameterError("window", window, f"ticks 0 <= k_a < k_b <= {n}")
+    p0 = cases[0].params
+    ref = batch_reference(p0, n)
+    sums = np.full((len(cases), ACC_SIZE), np.nan)
+    ok = np.zeros(len(cases), dtype=np.bool_)
+    finite = np.ones(len(cases), dtype=np.bool_)
+    compiled = [batch_code(c) is not None for c in cases]
+    for j, c in enumerate(cases):  # plug-in laws: one run each, scored from its samples
+        if not compiled[j]:
+            r = run(c.params, c.controller, duration)
+            w = r.obs[k_a:k_b + 1]
+            accumulate(sums[j], w[:, O_TQ], w[:, O_THV], w[:, O_HF], w[:, O_HP],
+                       ref.hip[k_a:k_b + 1], w[:, O_FP], ref.foot[k_a:k_b + 1])
+            ok[j] = r.diverged_at is None
+            finite[j] = bool(np.all(np.isfinite(w)))
+    fast = [j for j, f in enumerate(compiled) if f]
+    if fast:
+        no_obs = np.empty((len(fast), 0) + OBS_SHAPE)
+        sub_sums = np.full((len(fast), ACC_SIZE), np.nan)
+        sub_ok = np.zeros(len(fast), dtype=np.bool_)
+        sub_finite = np.ones(len(fast), dtype=np.bool_)
+        _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, no_obs, sub_ok, k_b,
+                            sub_sums, sub_finite)
+        sums[fast], ok[fast], finite[fast] = sub_sums, sub_ok, sub_finite
+    dt = p0.sim.control_period
+    return ScoredBatch(tuple(cases), (k_a * dt, k_b * dt), sums, ok & finite)
 
 
 def _read_only(view: np.ndarray) -> np.ndarray:
@@ -392,9 +449,11 @@ def batch_reference(p: HexapodParams, n: int) -> Reference:
 
 
 def _run_compiled_batch(cases: Sequence[Case], ref: Reference, n: int, k_a: int,
-                        obs: np.ndarray, ok: np.ndarray) -> None:
+                        obs: np.ndarray, ok: np.ndarray, k_b: int, sums: np.ndarray,
+                        finite: np.ndarray) -> None:
     """Run cases with a compiled law; their samples into ``obs`` (cases, n+1-k_a, 9, 6, 2)
-    and their ok flags into ``ok``."""
+    (or (cases, 0, 9, 6, 2): none), their ok flags into ``ok``, and with k_b >= k_a the sums
+    of ticks k_a..k_b into ``sums`` (cases, ACC_SIZE) and finite flags into ``finite``."""
     S = np.stack([initial_state(c.params) for c in cases])
     Ps = np.stack([model_vector(c.params) for c in cases])
     codes = np.array([batch_code(c) for c in cases], dtype=np.int64)
@@ -415,10 +474,10 @@ def _run_compiled_batch(cases: Sequence[Case], ref: Reference, n: int, k_a: int,
     counts = np.array([b.size for b in blocks], dtype=np.int64)
     block_substeps = np.array([substeps[b[0]] for b in blocks], dtype=np.int64)
     run_blocks(Xs, PTs, Cs, Gs, counts, ref.theta[:n], ref.theta_vel[:n], block_substeps, k_a,
-               obs, cols, ok)
+               obs, cols, ok, k_b, ref.hip, ref.foot, sums, finite)
 
 
-__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "batch_code",
-           "changeable", "compiled_code", "run", "run_batch", "run_drive_ticks",
-           "run_plugin_ticks", "run_ticks",
+__all__ = ["BLOCK_TICKS", "CHANGEABLE", "BatchResult", "Case", "RunResult", "ScoredBatch",
+           "batch_code", "changeable", "compiled_code", "run", "run_batch", "run_drive_ticks",
+           "run_plugin_ticks", "run_ticks", "score_batch",
            "shared_reference_key", "tick_count"]

@@ -26,8 +26,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.index_sums import (A_ENERGY, A_FORCE2, A_LAG, A_SAMPLES, A_SQ,
+                                            A_TORQUE2, A_X0, A_X1, accumulate,
+                                            new_accumulator)
 from hexapod_common.core.layout import O_FP, O_HF, O_HP, O_THV, O_TQ
-from hexapod_common.core.params import HexapodParams
+from hexapod_common.core.params import N_LEGS, HexapodParams
 
 #: Index names in report order, with units.
 INDEX_NAMES = ("E_av", "T_L", "F_L", "eps_xH", "eps_yH", "eps_xF", "eps_yF")
@@ -93,18 +96,26 @@ class WindowSums:
 def window_sums(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
                 hip_pos: np.ndarray, hip_ref: np.ndarray, foot_pos: np.ndarray,
                 foot_ref: np.ndarray, dt: float) -> WindowSums:
-    """:class:`WindowSums` of (N+1, 6, 2) sample arrays (row 0 only supplies x_iH(t_a))."""
+    """:class:`WindowSums` of (N+1, 6, 2) sample arrays (row 0 only supplies x_iH(t_a)),
+    through the compiled accumulator the batched engine scores with
+    (hexapod_common.core.index_sums)."""
     if hip_pos.shape[0] < 2:
         raise ValueError("an evaluation window needs at least two samples")
-    tq, w, f = torque[1:], joint_vel[1:], hip_force[1:]
-    err_h = hip_ref[1:] - hip_pos[1:]
-    err_f = foot_ref[1:] - foot_pos[1:]
-    sq = np.stack([np.sum(err_h[..., 0] ** 2, axis=0), np.sum(err_h[..., 1] ** 2, axis=0),
-                   np.sum(err_f[..., 0] ** 2, axis=0), np.sum(err_f[..., 1] ** 2, axis=0)])
-    return WindowSums(float(np.sum(np.abs(tq * w)) * dt), float(np.sum(tq * tq) * dt),
-                      float(np.sum(f * f) * dt), sq, hip_pos.shape[0] - 1,
-                      float(np.mean(hip_pos[-1, :, 0] - hip_pos[0, :, 0])),
-                      float(np.sum(err_h[..., 0])))
+    acc = new_accumulator()
+    accumulate(acc, *(np.asarray(a, dtype=np.float64) for a in
+                      (torque, joint_vel, hip_force, hip_pos, hip_ref, foot_pos, foot_ref)))
+    return sums_from_accumulator(acc, dt)
+
+
+def sums_from_accumulator(acc: np.ndarray, dt: float) -> WindowSums:
+    """:class:`WindowSums` of an accumulator (hexapod_common.core.index_sums) of samples
+    spaced ``dt`` (s)."""
+    return WindowSums(float(acc[A_ENERGY]) * dt, float(acc[A_TORQUE2]) * dt,
+                      float(acc[A_FORCE2]) * dt,
+                      acc[A_SQ:A_SQ + 4 * N_LEGS].reshape(4, N_LEGS).copy(),
+                      int(acc[A_SAMPLES]),
+                      float(np.mean(acc[A_X1:A_X1 + N_LEGS] - acc[A_X0:A_X0 + N_LEGS])),
+                      float(acc[A_LAG]))
 
 
 def compute_indices(torque: np.ndarray, joint_vel: np.ndarray, hip_force: np.ndarray,
@@ -152,4 +163,4 @@ def lag_growth(previous: Indices | None, current: Indices | None) -> float:
 
 __all__ = ["INDEX_NAMES", "INDEX_UNITS", "Indices", "REPORTED_NAMES", "WindowSums",
            "compute_indices", "evaluation_window", "indices_from_obs", "lag_growth",
-           "sums_from_obs", "window_sums"]
+           "sums_from_accumulator", "sums_from_obs", "window_sums"]
