@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from .errors import UnreachableTargetError
-from .kinematics import N_LEGS, ik_scalar, joint_rates
+from .kinematics import N_LEGS, ik_with_rates
 
 
 class GaitModel(Protocol):
@@ -110,8 +110,7 @@ def _reference_kernel(t, phi, x0, period, t_t, t_s, velocity, step_length, clear
                 r = np.sqrt(r2)
                 if not (r_min <= r <= r_max):
                     return n * 6 + i
-                th1, th2 = ik_scalar(px, py, r2, l1, l2)
-                w1, w2 = joint_rates(th1, th2, velocity - vx, -vy, l1, l2)
+                th1, th2, w1, w2 = ik_with_rates(px, py, r2, velocity - vx, -vy, l1, l2)
                 out[n, 4, i, 0], out[n, 4, i, 1] = th1, th2
                 out[n, 5, i, 0], out[n, 5, i, 1] = w1, w2
     return -1

@@ -80,17 +80,41 @@ def foot_force_torque(th1, th2, fx, fy, l1, l2):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, error_model="numpy")
+def _ik_parts(px, py, r2, l1, l2):  # type: ignore[no-untyped-def]
+    """theta1, theta2 of a reachable target and cos, sin of theta2 (forward knee)."""
+    # Foot relative to hip, measured in a frame whose first axis points down.
+    c2 = min(1.0, max(-1.0, (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)))
+    s2 = -np.sqrt(1.0 - c2 * c2)  # sin(theta2), theta2 = -arccos(c2) <= 0
+    th1 = np.arctan2(-px, py) - np.arctan2(l2 * s2, l1 + l2 * c2)
+    return th1, -np.arccos(c2), c2, s2
+
+
+@njit(cache=True, error_model="numpy")
 def ik_scalar(px, py, r2, l1, l2):  # type: ignore[no-untyped-def]
     """theta = Psi^-1(p) of one reachable target p = p_H - p_F with r2 = |p|^2 (forward knee).
 
     The caller checks the reach; this is the formula shared by :func:`inverse_kinematics`
     and the compiled reference of the gait.
     """
-    # Foot relative to hip, measured in a frame whose first axis points down.
-    c2 = min(1.0, max(-1.0, (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)))
-    th2 = -np.arccos(c2)
-    th1 = np.arctan2(-px, py) - np.arctan2(l2 * np.sin(th2), l1 + l2 * np.cos(th2))
+    th1, th2, _, _ = _ik_parts(px, py, r2, l1, l2)
     return th1, th2
+
+
+@njit(cache=True, error_model="numpy")
+def ik_with_rates(px, py, r2, vx, vy, l1, l2):  # type: ignore[no-untyped-def]
+    """:func:`ik_scalar` and :func:`joint_rates` of the same target in one go (paper eqs.
+    4b-4c), J's trigonometry replaced by algebra: with a = L1 + L2 cos th2, b = L2 sin th2,
+    cos th1 = (p_y a - p_x b) / r^2, sin th1 = (-p_x a - p_y b) / r^2, and J's first column is
+    (-p_y, p_x). Returns th1, th2 (rad), their rates (rad/s) for v = d/dt Psi (m/s)."""
+    th1, th2, c2, s2 = _ik_parts(px, py, r2, l1, l2)
+    a, b = l1 + l2 * c2, l2 * s2
+    c1 = (py * a - px * b) / r2
+    s1 = (-px * a - py * b) / r2
+    c12 = c1 * c2 - s1 * s2
+    s12 = s1 * c2 + c1 * s2
+    j11, j12, j21, j22 = -py, -l2 * c12, px, -l2 * s12
+    det = j11 * j22 - j12 * j21
+    return th1, th2, (j22 * vx - j12 * vy) / det, (-j21 * vx + j11 * vy) / det
 
 
 def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float,
@@ -118,5 +142,5 @@ def inverse_kinematics(px: np.ndarray | float, py: np.ndarray | float, l1: float
 
 
 __all__ = ["N_LEGS", "foot_force_torque", "foot_offset", "foot_offset_cs", "foot_velocity_cs",
-           "ik_scalar", "inverse_kinematics", "joint_rates",
+           "ik_scalar", "ik_with_rates", "inverse_kinematics", "joint_rates",
            "knee_offset", "psi", "psi_jacobian"]
