@@ -4,8 +4,9 @@ import pytest
 
 from hexapod_common.core.errors import UnreachableTargetError
 from hexapod_common.core.gait import reference
-from hexapod_common.core.kinematics import (foot_force_torque, foot_offset, inverse_kinematics,
-                                            joint_rates, psi, psi_jacobian)
+from hexapod_common.core.kinematics import (foot_force_torque, foot_offset, ik_scalar,
+                                            ik_with_rates, inverse_kinematics, joint_rates,
+                                            psi, psi_jacobian)
 from hexapod_common.core.params import load_params
 
 
@@ -80,3 +81,23 @@ def test_foot_force_torque_is_virtual_work():
     b = np.array(foot_offset(th1 - h * w1, th2 - h * w2, 1.0, 0.8))
     v = (a - b) / (2 * h)
     assert tau @ [w1, w2] == pytest.approx(v @ [fx, fy], rel=1e-7)
+
+
+def test_ik_with_rates_equals_ik_then_inverse_jacobian():
+    """The reference's one-call IK and rates (no J trigonometry) against ik_scalar and
+    joint_rates over the whole workspace (forward knee, away from the straight leg)."""
+    rng = np.random.default_rng(3)
+    l1, l2 = 0.5, 0.4
+    for _ in range(500):
+        th1, th2 = rng.uniform(-1.2, 1.2), rng.uniform(-2.8, -0.05)
+        px = -(l1 * np.sin(th1) + l2 * np.sin(th1 + th2))
+        py = l1 * np.cos(th1) + l2 * np.cos(th1 + th2)
+        vx, vy = rng.normal(size=2)
+        r2 = px * px + py * py
+        t1, t2, w1, w2 = ik_with_rates(px, py, r2, vx, vy, l1, l2)
+        e1, e2 = ik_scalar(px, py, r2, l1, l2)
+        f1, f2 = joint_rates(e1, e2, vx, vy, l1, l2)
+        assert (t1, t2) == (e1, e2)
+        assert t1 == pytest.approx(th1, abs=1e-12) and t2 == pytest.approx(th2, abs=1e-12)
+        assert w1 == pytest.approx(f1, rel=1e-9, abs=1e-9)
+        assert w2 == pytest.approx(f2, rel=1e-9, abs=1e-9)
