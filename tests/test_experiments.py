@@ -227,3 +227,32 @@ def test_an_inline_chunk_gives_every_numba_thread_blocks_to_run():
     assert chunk_size_of(MemoBackend(InlineBackend())) == size
     assert chunk_size_of(ProcessBackend(2)) == CHUNK_CASES  # one thread per worker
     assert len(block_plan(np.full(size, 2), threads)) >= 2 * threads
+
+
+def test_worker_chunks_are_wide_but_leave_every_worker_two():
+    """Single-threaded workers get chunks of 8 to 32 cases (a block of 32 runs faster a case),
+    at least two per worker where there are cases enough."""
+    from hexapod_bringup.core.parallel import (CHUNK_CASES, MAX_CHUNK_CASES, chunk_size_of,
+                                               run_cases)
+
+    assert chunk_size_of(ProcessBackend(2), 256) == MAX_CHUNK_CASES == 32
+    assert chunk_size_of(ProcessBackend(2), 42) == 11  # the default 21-point sweep: 4 chunks
+    assert chunk_size_of(ProcessBackend(2), 20) == CHUNK_CASES
+    assert chunk_size_of(ProcessBackend(8), 256) == 16
+    assert chunk_size_of(MemoBackend(ProcessBackend(2)), 256) == 32
+
+    class Counting(InlineBackend):
+        chunk_size = None  # type: ignore[assignment]
+        workers = 2
+        sizes: list[int] = []
+
+        def map(self, chunks):  # type: ignore[no-untyped-def]
+            self.sizes += [len(c[1]) for c in chunks]
+            return super().map(chunks)
+
+    p = load_params(**{"sim.control_period": 0.001})
+    cases = [Case(p.with_values(**{"ground.scale": 1.0 + k / 100}), "pd_p") for k in range(42)]
+    backend = Counting()
+    outs = run_cases(cases, 1.0, backend)
+    assert backend.sizes == [11, 11, 11, 9]
+    assert [o.case for o in outs] == cases
