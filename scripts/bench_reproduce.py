@@ -8,7 +8,15 @@ shared), and prints each run's wall time, the CPU seconds of the command and its
 the load average around it, and the medians; it also checks that both backends wrote the
 same claims and numbers (results.json).
 
+With ``--vs-batched`` it instead runs the reproduction in this process on the local process
+pool, records every batched case it runs (the experiments' points, each once) and its
+single runs (whole time series for the figures, plain-Python PD^alpha), then times the
+batched engine on those same cases in one batch per shared reference and duration (numba's
+threads on every core): the reproduction's wall time against the batched engine's on its
+batched work (target: the engine's time >= 0.8 of the reproduction's).
+
 Usage: python scripts/bench_reproduce.py [--reps 2] [--workers 2] [--nice 10] [--full]
+       [--vs-batched]
 """
 from __future__ import annotations
 
@@ -43,13 +51,73 @@ def run_once(backend: list[str], out: Path, quick: bool, nice: int) -> dict[str,
     return {"wall": wall, "cpu": cpu, "load0": load0, "load1": os.getloadavg()[0]}
 
 
+class _Recording:
+    """A backend that runs on ``inner`` and records the batched cases and single runs."""
+
+    def __init__(self, inner: object) -> None:
+        self.inner = inner
+        self.cases: list[tuple[object, float]] = []
+        self.singles = 0
+
+    @property
+    def workers(self) -> int:
+        return int(self.inner.workers)  # type: ignore[attr-defined]
+
+    def map(self, chunks):  # type: ignore[no-untyped-def]
+        for _, cases, duration in chunks:
+            self.cases += [(c, duration) for c in cases]
+        return self.inner.map(chunks)  # type: ignore[attr-defined]
+
+    def calls(self, fn, items):  # type: ignore[no-untyped-def]
+        self.singles += len(items)
+        return self.inner.calls(fn, items)  # type: ignore[attr-defined]
+
+
+def vs_batched(quick: bool, workers: int) -> int:
+    """The reproduction in process against the batched engine on its batched cases."""
+    from hexapod_bringup.core.parallel import ProcessBackend
+    from hexapod_bringup.core.simulate import evaluate_batch
+    from hexapod_bringup.report import Plan, reproduce
+    from hexapod_common.core.params import load_params
+    from hexapod_control.core.closed_loop import shared_reference_key
+
+    p = load_params()
+    with ProcessBackend(workers) as pool, tempfile.TemporaryDirectory() as tmp:
+        rec = _Recording(pool.start())
+        t0 = time.perf_counter()
+        reproduce(p, Path(tmp), rec, Plan.quick() if quick else Plan())  # type: ignore[arg-type]
+        t_rep = time.perf_counter() - t0
+    groups: dict[tuple[object, ...], list[object]] = {}
+    for case, duration in rec.cases:
+        groups.setdefault((shared_reference_key(case.params), duration), []).append(case)  # type: ignore[attr-defined]
+    sim = sum(d * len(cs) for (_, d), cs in groups.items())
+    for (_, d), cs in groups.items():  # warm-up: load the compiled code
+        evaluate_batch(cs[:1], d)
+        break
+    t0 = time.perf_counter()
+    for (_, d), cs in groups.items():
+        evaluate_batch(cs, d)  # type: ignore[arg-type]
+    t_batch = time.perf_counter() - t0
+    print(f"reproduce {'--quick' if quick else '(full)'} in process on {workers} workers: "
+          f"{t_rep:.1f} s wall; {len(rec.cases)} batched runs ({sim:g} sim s, "
+          f"{len(groups)} batches) and {rec.singles} single runs")
+    print(f"the batched engine on the same batched runs: {t_batch:.1f} s "
+          f"({sim / t_batch:.0f} sim s/s)")
+    print(f"ratio (engine time / reproduction time): {t_batch / t_rep:.2f}; target 0.8")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=2)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--nice", type=int, default=10)
     ap.add_argument("--full", action="store_true", help="the whole reproduction, not --quick")
+    ap.add_argument("--vs-batched", action="store_true",
+                    help="the reproduction against the batched engine on its batched runs")
     args = ap.parse_args(argv)
+    if args.vs_batched:
+        return vs_batched(not args.full, args.workers)
     kind = "full" if args.full else "quick"
     backends = {"processes": ["--backend", "processes"],
                 f"dask local:{args.workers}": ["--dask", f"local:{args.workers}"]}

@@ -294,8 +294,9 @@ def advantage_map(rates: Sequence[float], percents: Sequence[float],
                        Patch(color="lightgrey", label="undecided (within bands)"),
                        Patch(fill=False, hatch="///", label="a deciding number not dt-converged")],
               fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.tight_layout()
-    fig.savefig(path)
+    # the canvas grows to hold the legend beside the map (tight_layout could not make room
+    # for it on a small map: the legend and the y label were cut off)
+    fig.savefig(path, bbox_inches="tight")
     return path
 
 
