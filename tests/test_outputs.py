@@ -82,3 +82,26 @@ def test_progress_bar_with_eta_on_a_terminal_and_silent_otherwise():
         tty.flush()
         assert _drain(master) == "x"
     os.close(master)
+
+
+def test_report_figures_are_drawn_on_the_workers_and_their_failures_raised(tmp_path):
+    """reproduce draws its figures on the local workers between their runs (plots.Drawer):
+    the file is there once wait() returns, and a figure that fails raises there; without
+    local workers (inline) a figure is drawn at once."""
+    import numpy as np
+
+    from hexapod_bringup import plots
+    from hexapod_bringup.core.parallel import InlineBackend, MemoBackend, ProcessBackend
+
+    series = {"pd_p": (np.linspace(0.0, 1.0, 50), np.linspace(0.0, 2.0, 50))}
+    with ProcessBackend(2) as pool:
+        drawer = plots.Drawer(MemoBackend(pool))
+        drawer.draw(plots.time_plot, series, "dxH", tmp_path / "worker.png", "on a worker")
+        drawer.wait()
+        assert (tmp_path / "worker.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        drawer.draw(plots.time_plot, series, "no such signal", tmp_path / "bad.png", "")
+        with pytest.raises(KeyError, match="no such signal"):
+            drawer.wait()
+    here = plots.Drawer(InlineBackend())
+    here.draw(plots.time_plot, series, "dyH", tmp_path / "here.png", "here")
+    assert (tmp_path / "here.png").exists()

@@ -8,7 +8,7 @@ from __future__ import annotations
 import io
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -220,25 +220,62 @@ def sweep_plots(figures: Sequence[SweepFigure], backend: Any = None) -> list[Pat
     return paths
 
 
-def rate_plot(sweeps: Mapping[float, SweepResult], name: str, path: Path, title: str) -> Path:
+def _draw_job(job: tuple[Callable[..., Any], tuple[Any, ...], dict[str, Any]]) -> Any:
+    fn, args, kw = job
+    return fn(*args, **kw)
+
+
+class Drawer:
+    """Draws figures (``draw(plot_function, *args, **kw)``) on the local worker processes of
+    a backend while the caller goes on: they queue between its chunks of runs instead of
+    keeping the command's process busy while the workers wait. Without local workers
+    (inline, Dask: a remote worker's file would not be here) it draws at once. :meth:`wait`
+    returns once every figure is written and raises the first failure."""
+
+    def __init__(self, backend: Any = None) -> None:
+        from .core.parallel import local_submit
+
+        self._submit = local_submit(backend)
+        self._pending: list[Any] = []
+
+    def draw(self, fn: Callable[..., Any], *args: Any, **kw: Any) -> None:
+        """``fn(*args, **kw)``, here or on a worker (arguments must pickle: prefer
+        :class:`SweepCurves` to a whole :class:`SweepResult`)."""
+        if self._submit is None:
+            fn(*args, **kw)
+        else:
+            self._pending.append(self._submit(_draw_job, (fn, args, kw)))
+
+    def wait(self) -> None:
+        """Every figure drawn so far is written (the first failure raised)."""
+        pending, self._pending = self._pending, []
+        for fut in pending:
+            fut.result()
+
+
+def rate_plot(sweeps: Mapping[float, SweepResult | SweepCurves], name: str, path: Path,
+              title: str) -> Path:
     """E6: one index against the control rate (Hz, log axis), one panel per ground.
 
-    ``sweeps[rate]`` are checked ground sweeps that share their ground values.
+    ``sweeps[rate]`` are checked ground sweeps that share their ground values (or their
+    :class:`SweepCurves` of ``name``).
     """
-    rates = np.array(sorted(sweeps))
-    values = next(iter(sweeps.values())).values
+    cur = {r: s if isinstance(s, SweepCurves) else SweepCurves.of(s, (name,))
+           for r, s in sweeps.items()}
+    rates = np.array(sorted(cur))
+    first = next(iter(cur.values()))
+    values = first.values
     cols = 3
     rows = -(-len(values) // cols)
     fig = _figure(figsize=(4.0 * cols, 2.8 * rows), dpi=100)
     axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
     for k, v in enumerate(values):
         ax = axes[k // cols][k % cols]
-        for c in next(iter(sweeps.values())).outcomes:
+        for c in first.controllers:
             color = STYLES.get(c, {}).get("color", "k")
-            y = np.array([sweeps[r].index(c, name)[k] for r in rates])
-            ok = np.array([sweeps[r].converged(c, name)[k] for r in rates])
-            lo = np.array([sweeps[r].band(c, name)[0][k] for r in rates])
-            hi = np.array([sweeps[r].band(c, name)[1][k] for r in rates])
+            y, ok, lo, hi = (np.array([cur[r].curves[(c, name)][j][k] for r in rates])
+                             for j in range(4))
+            ok = ok.astype(bool)
             ax.plot(rates, y, lw=1.1, color=color, label=label(c))
             ax.fill_between(rates, lo, hi, color=color, alpha=0.18, lw=0)
             ax.plot(rates[ok], y[ok], "o", ms=3.5, color=color)

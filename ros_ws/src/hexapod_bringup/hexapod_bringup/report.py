@@ -160,14 +160,15 @@ def _indices_table(points: Mapping[str, Mapping[str, Measured]],
 
 
 def _time_figures(sims: dict[str, Simulation], fine: dict[str, Simulation], out: Path,
-                  specs: list[tuple[str, str, str]], verdict: str) -> list[str]:
+                  specs: list[tuple[str, str, str]], verdict: str,
+                  drawer: plots.Drawer) -> list[str]:
     series = {c: plots.time_signals(s.run.obs, s.run.reference.hip) for c, s in sims.items()}
     fser = {c: plots.time_signals(s.run.obs, s.run.reference.hip) for c, s in fine.items()}
     names = []
     for key, fname, title in specs:
-        plots.time_plot({c: (s.run.t, series[c][key]) for c, s in sims.items()}, key,
-                        out / fname, f"{title}\n{verdict}",
-                        fine={c: (s.run.t, fser[c][key]) for c, s in fine.items()})
+        drawer.draw(plots.time_plot, {c: (s.run.t, series[c][key]) for c, s in sims.items()},
+                    key, out / fname, f"{title}\n{verdict}",
+                    fine={c: (s.run.t, fser[c][key]) for c, s in fine.items()})
         names.append(fname)
     return names
 
@@ -328,7 +329,8 @@ def _hz(rate: float | None) -> str:
     return f"{rate / 1000:g} kHz"
 
 
-def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float) -> list[str]:
+def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float,
+                drawer: plots.Drawer) -> list[str]:
     md = ["## E6: how fast must the force loop be closed? (control rate, ours)", "",
           f"Control rates {', '.join(_hz(r) for r in e6.rates)} × ground "
           f"{', '.join(f'{g:g}' for g in e6.percents)} % × T_max "
@@ -377,17 +379,18 @@ def _e6_section(e6: RateResult, f: RateFindings, out: Path, paper_rate: float) -
     md.append("")
     for t in e6.t_max_values:
         fname = f"fig_e6_map_tmax{t:g}.png"
-        plots.advantage_map(e6.rates, e6.percents, f.cells[t], f.converged_deciding[t],
-                            out / fname, f"E6: who tracks better, T_max = {t:g} N m")
+        drawer.draw(plots.advantage_map, e6.rates, e6.percents, f.cells[t],
+                    f.converged_deciding[t], out / fname,
+                    f"E6: who tracks better, T_max = {t:g} N m")
         md.append(f"![{fname}]({fname})")
     md.append("")
     links = []
     for t in e6.t_max_values:
-        by_rate = {r: e6.sweeps[(r, t)] for r in e6.rates}
         for n in INDEX_NAMES:
             fname = f"fig_e6_{n}_tmax{t:g}.png"
-            plots.rate_plot(by_rate, n, out / fname,
-                            f"E6: {n} vs control rate, T_max = {t:g} N m")
+            drawer.draw(plots.rate_plot,
+                        {r: plots.SweepCurves.of(e6.sweeps[(r, t)], (n,)) for r in e6.rates},
+                        n, out / fname, f"E6: {n} vs control rate, T_max = {t:g} N m")
             links.append(f"[{n}, {t:g} N m]({fname})")
     md += ["Each index against the control rate: " + ", ".join(links) + ".", ""]
     return md
@@ -398,8 +401,8 @@ E7_CONTROLLERS = ("pd_p", "pd_pf", "pd_alpha")
 
 
 def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backend,
-                progress: Callable[[str, int], Callable[[int], None]], out: Path
-                ) -> tuple[list[str], dict[str, object]]:
+                progress: Callable[[str, int], Callable[[int], None]], out: Path,
+                drawer: plots.Drawer) -> tuple[list[str], dict[str, object]]:
     """E7: PD^alpha against PD-P and PD-P&F at the base case and over the ground sweep at
     each of plan.e7_t_max, with convergence bands, and its indices against alpha."""
     g = p400.gains("pd_alpha")
@@ -433,8 +436,9 @@ def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backe
                   for c in ("pd_p", "pd_pf")]
             md.append(f"| {t:g} | {pct:g} | {vs[0]} | {vs[1]} |")
         fname = f"fig_e7_ground_tmax{t:g}.png"
-        plots.sweep_plot(res, ("E_av", "eps_xH", "eps_yH"), out / fname,
-                         f"E7: PD^α, PD-P, PD-P&F over the ground, T_max = {t:g} N m")
+        names = ("E_av", "eps_xH", "eps_yH")
+        drawer.draw(plots.sweep_plot, plots.SweepCurves.of(res, names), names, out / fname,
+                    f"E7: PD^α, PD-P, PD-P&F over the ground, T_max = {t:g} N m")
         figs.append(f"![{fname}]({fname})")
         sweeps_doc[f"tmax{t:g}"] = res.rows()
     md += [""] + figs + [""]
@@ -442,9 +446,10 @@ def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backe
                   duration=duration, backend=backend, check=True,
                   progress=progress("E7 alpha (runs)", len(plan.e7_alphas) * RUNS))
     fname = "fig_e7_alpha.png"
-    plots.sweep_plot(alpha, ("E_av", "T_L", "eps_xH", "eps_yH"), out / fname,
-                     "E7: PD^α's indices against α (base case)", x_scale=1.0,
-                     x_label="α (order of the derivative)", log_x=False)
+    names = ("E_av", "T_L", "eps_xH", "eps_yH")
+    drawer.draw(plots.sweep_plot, plots.SweepCurves.of(alpha, names), names, out / fname,
+                "E7: PD^α's indices against α (base case)", x_scale=1.0,
+                x_label="α (order of the derivative)", log_x=False)
     md += [f"**Against α** (base case, gains above): ![{fname}]({fname})", ""]
     doc.update({"ground": sweeps_doc, "alpha": alpha.rows()})
     return md, doc
@@ -471,6 +476,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     Each (case, duration) runs once: the experiments share points (MemoBackend)."""
     plan = plan or Plan()
     backend = MemoBackend(backend)
+    drawer = plots.Drawer(backend)  # figures on the workers, between the runs
     out.mkdir(parents=True, exist_ok=True)
     rate = 1.0 / p.sim.control_period
     duration = p.run.duration
@@ -505,7 +511,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                  for (r, t), res in e6.sweeps.items()
                  for row in (_drive_sweep(res, e6.drive[(r, t)]) if drive else res).rows()
                  if not drive or row["controller"] == "pd_pf"])
-    e6_md = _e6_section(e6, findings, out, rate)
+    e6_md = _e6_section(e6, findings, out, rate, drawer)
 
     # E1 ------------------------------------------------------------------------------
     tick = progress("E1 base case (runs)", 2 * len(CONTROLLERS) + len(CONTROLLERS) * RUNS)
@@ -527,7 +533,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
         ("dyH", "fig05_hip_error_y.png", "Fig. 5: |Δ1yH|, T_max = 400 N m"),
         ("Tm11", "fig06_torque_11.png", "Fig. 6: T_m11, T_max = 400 N m"),
         ("Tm12", "fig07_torque_12.png", "Fig. 7: T_m12, T_max = 400 N m")],
-        _verdict_line(base_conv))
+        _verdict_line(base_conv), drawer)
     plots.stick_picture(base["pd_pf"].run.obs, base["pd_pf"].run.t, p.robot.leg_length_1,
                         out / "stick_figure.png", "PD-P&F, base case: the last gait cycle "
                         "(blue: left legs, red: right legs, green: ground forces)")
@@ -556,8 +562,8 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                                            (("eps_xH", "eps_yH"), "hip errors"),
                                            (("eps_xF", "eps_yF"), "foot errors")]):
             fname = f"fig{k + j:02d}_{'_'.join(names)}_tmax{t_max:g}.png"
-            plots.sweep_plot(res, names, out / fname,
-                             f"Fig. {k + j}: {what} vs ground, T_max = {t_max:g} N m")
+            drawer.draw(plots.sweep_plot, plots.SweepCurves.of(res, names), names, out / fname,
+                        f"Fig. {k + j}: {what} vs ground, T_max = {t_max:g} N m")
             e2_md.append(f"![{fname}]({fname})")
         e2_md.append("")
 
@@ -567,9 +573,10 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                      progress=progress("E3 T_max sweep (runs)", n))
     _write_rows(out / "e3_tmax_sweep.csv", e3.rows())
     fname = "fig_e3_tracking_vs_tmax.png"
-    plots.sweep_plot(e3, ("eps_xH", "eps_yH", "T_L"), out / fname,
-                     "E3: saturation sweep at the base ground", x_scale=1.0,
-                     x_label="T_max (N m)", log_x=False)
+    names = ("eps_xH", "eps_yH", "T_L")
+    drawer.draw(plots.sweep_plot, plots.SweepCurves.of(e3, names), names, out / fname,
+                "E3: saturation sweep at the base ground", x_scale=1.0,
+                x_label="T_max (N m)", log_x=False)
     strong_p = p.with_values(**{"actuator.t_max": plan.strong_t_max})
     strong_conv = dict(zip(CONTROLLERS, check_cases(
         [Case(strong_p, c) for c in CONTROLLERS], duration, backend,
@@ -631,7 +638,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
              f"Fig. 16: T_m11, T_max → ∞, ground {plan.ideal_plot_percent:g} %"),
             ("dyH", "fig17_hip_error_y_ideal.png",
              f"Fig. 17: |Δ1yH|, T_max → ∞, ground {plan.ideal_plot_percent:g} %")],
-            _verdict_line(conv_hard))
+            _verdict_line(conv_hard), drawer)
         e4_md += [""] + [f"![{f}]({f})" for f in figs]
     e4_md.append("")
 
@@ -681,7 +688,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     e5_md += cma_md
     e8_md, e8_doc = e8_section(p400, plan.e8_percents, plan.e8_spreads, plan.e8_t_max,
                                plan.e8_seeds, backend, progress)
-    e7_md, e7_doc = _e7_section(p400, plan, duration, backend, progress, out)
+    e7_md, e7_doc = _e7_section(p400, plan, duration, backend, progress, out, drawer)
 
     # Claims --------------------------------------------------------------------------
     sweep_pts = {t: _sweep_points(res) for t, res in sweeps.items()}
@@ -701,6 +708,7 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     claims_md += ["", "The numbers behind each verdict: `results.json` (`claims[].evidence`)."]
     claims_md += [""] + [_why(v) for v in verdicts if v.status != claims.HOLDS] + [""]
     md += claims_md + e6_md + e1_md + e2_md + e3_md + e4_md + e5_md + e7_md + e8_md
+    drawer.wait()  # every figure the README links is written
     (out / "README.md").write_text("\n".join(md) + "\n")
 
     def conv_doc(cv: Convergence) -> dict[str, object]:

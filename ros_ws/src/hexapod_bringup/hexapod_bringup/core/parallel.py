@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Iterator, Protocol, Sequence, TypeVar
 
 from hexapod_control.core.closed_loop import Case, shared_reference_key
@@ -159,6 +159,12 @@ class ProcessBackend:
         finally:
             for fut in futures:
                 fut.cancel()
+
+    def submit(self, fn: Callable[[T], R], item: T) -> "Future[R]":
+        """``fn(item)`` on a worker, queued behind what was submitted before; its future."""
+        pool = self.start()._pool
+        assert pool is not None
+        return pool.submit(fn, item)
 
     def close(self) -> None:
         """Stop the worker processes (idempotent)."""
@@ -328,6 +334,15 @@ class MemoBackend:
         return chunk_size_of(self.inner, cases)
 
 
+def local_submit(backend: object) -> Callable[[Callable[[Any], Any], Any], "Future[Any]"] | None:
+    """``submit(fn, item)`` of ``backend``'s local worker processes (through wrappers that
+    keep theirs as ``inner``, as :class:`MemoBackend` does), or None if it has none (inline,
+    Dask)."""
+    while hasattr(backend, "inner"):
+        backend = backend.inner
+    return backend.submit if isinstance(backend, ProcessBackend) else None
+
+
 def chunk_size_of(backend: object, cases: int = 0) -> int:
     """Cases per chunk when ``cases`` cases run on ``backend``: its own ``chunk_size`` (or
     ``chunk_size_for(cases)``) if it has one; else, for single-threaded workers, at least two
@@ -375,4 +390,5 @@ def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
 
 __all__ = ["BACKENDS", "Backend", "CHUNK_CASES", "DaskBackend", "InlineBackend",
            "LOCAL_PREFIX", "MAX_CHUNK_CASES", "MemoBackend", "ProcessBackend", "chunk_size_of",
-           "evaluate_chunk", "local_workers", "make_backend", "pool_start_method", "run_cases"]
+           "evaluate_chunk", "local_submit", "local_workers", "make_backend",
+           "pool_start_method", "run_cases"]
