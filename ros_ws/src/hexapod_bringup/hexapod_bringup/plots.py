@@ -5,7 +5,6 @@ Time plots (Figs. 4-7, 16-17): one curve per controller. Sweep plots (Figs. 8-15
 """
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -193,31 +192,15 @@ def sweep_plot(res: SweepResult | SweepCurves, names: Sequence[str], path: Path,
 SweepFigure = tuple[SweepResult, Sequence[str], Path, str, dict[str, Any]]
 
 
-def _sweep_png(fig: tuple[SweepCurves, Sequence[str], str, dict[str, Any]]) -> bytes:
-    sc, names, title, kw = fig
-    buf = io.BytesIO()
-    sweep_plot(sc, names, buf, title, **kw)  # type: ignore[arg-type]
-    return buf.getvalue()
-
-
 def sweep_plots(figures: Sequence[SweepFigure], backend: Any = None) -> list[Path]:
-    """Draw sweep figures (:func:`sweep_plot`); on the local worker processes of ``backend``
-    when it has them (a ``ProcessBackend``: its workers are idle once the runs are done, and
-    the figures then take half the wall time on two cores), else here. The PNG files are
-    written here either way."""
-    from .core.parallel import ProcessBackend
-
-    jobs = [(SweepCurves.of(res, names), names, title, kw)
-            for res, names, _, title, kw in figures]
-    if isinstance(backend, ProcessBackend) and backend.workers > 1 and len(jobs) > 1:
-        pngs = dict(backend.calls(_sweep_png, jobs))
-    else:
-        pngs = {k: _sweep_png(job) for k, job in enumerate(jobs)}
-    paths = []
-    for k, (_, _, path, _, _) in enumerate(figures):
-        Path(path).write_bytes(pngs[k])
-        paths.append(Path(path))
-    return paths
+    """Draw sweep figures (:func:`sweep_plot`) through a :class:`Drawer`: on the local worker
+    processes of ``backend`` when it has them (idle once the runs are done: the figures then
+    take half the wall time on two cores), else here."""
+    drawer = Drawer(backend)
+    for res, names, path, title, kw in figures:
+        drawer.draw(sweep_plot, SweepCurves.of(res, names), names, path, title, **kw)
+    drawer.wait()
+    return [Path(path) for _, _, path, _, _ in figures]
 
 
 def _draw_job(job: tuple[Callable[..., Any], tuple[Any, ...], dict[str, Any]]) -> Any:
