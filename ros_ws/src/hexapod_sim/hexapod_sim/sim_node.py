@@ -69,7 +69,10 @@ STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 LOOK_PERIOD = 0.002
 STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
-JOINED_MATCH_WAIT = 0.5  # s tick 0 waits more for a joined controller in charge (no service)
+#: s tick 0 waits more for a joined controller in charge (it has no inputs_matched service):
+#: for its command writer to match the recorder's reader. 0.5 s lost the first ~30 of 2000
+#: commands to the recorder on a loaded two-worker CI run, twice in two stops.
+JOINED_MATCH_WAIT = 1.5
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
