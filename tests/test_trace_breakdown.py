@@ -99,3 +99,16 @@ def test_a_traced_process_writes_its_rows_at_exit_and_none_without_the_variable(
                          env={k: v for k, v in os.environ.items()
                               if k != tr.TRACE_ENV})
     assert off.stdout.strip() == "None"
+
+
+def test_a_node_forked_from_a_server_without_the_variable_traces_from_its_own_environment(
+        tmp_path):
+    # The graph's fork server imports trace before any node's environment is known (the
+    # nodes' environments are set after the fork): naming the process creates its tracer.
+    code = ("import os; from hexapod_common.core import trace as t; assert t.TRACER is None; "
+            f"os.environ[{tr.TRACE_ENV!r}] = {str(tmp_path)!r}; t.name_process('forked'); "
+            "t.TRACER.mark(t.LAW0, '/hexapod/joint_commands', 9)")
+    subprocess.run([sys.executable, "-c", code], check=True,
+                   env={k: v for k, v in os.environ.items() if k != tr.TRACE_ENV})
+    rows = load(tmp_path)["forked"]
+    assert rows.shape == (1, 6) and list(rows[0, :3]) == [tr.LAW0, ID[T.JOINT_COMMANDS], 9]

@@ -104,7 +104,12 @@ TRACER: Tracer | None = _from_env()
 
 
 def name_process(name: str) -> None:
-    """Name this process's trace file after its node (call once, at node start)."""
+    """Name this process's trace file after its node (call once, at node start). A node
+    forked from a server that imported this module without ``HEXAPOD_TRACE_DIR`` (the
+    graph's fork server) gets its tracer here, from its own environment."""
+    global TRACER
+    if TRACER is None:
+        TRACER = _from_env()
     if TRACER is not None:
         TRACER.path = TRACER.path.with_name(f"{name}-{os.getpid()}.npy")
 
