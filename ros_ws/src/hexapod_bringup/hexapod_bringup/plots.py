@@ -53,19 +53,27 @@ def time_signals(obs: np.ndarray, hip_ref: np.ndarray) -> dict[str, np.ndarray]:
             "Tm11": obs[:, O_TQ, 0, 0], "Tm12": obs[:, O_TQ, 0, 1]}
 
 
-def stick_picture(obs: np.ndarray, t: np.ndarray, l1: float, path: Path, title: str = "",
-                  frames: int = 3) -> Path:
-    """The robot walking, seen from its left: ``frames`` snapshots (hips, knees, feet, the
-    body line, ground forces as arrows) of one run's samples (N, 9, 6, 2) at times ``t``
-    (s), spread over the first two thirds of its last gait cycle (half the samples), one
-    panel each, in the world frame."""
-    from hexapod_metrics.core.figure import FORCE_SCALE, stick_figure
-
-    fig = _figure(figsize=(3.2 * frames, 2.4), dpi=110)
-    axes = fig.subplots(1, frames, sharey=True)
+def stick_samples(obs: np.ndarray, t: np.ndarray, frames: int = 3
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The samples :func:`stick_picture` draws of one run's samples (N, 9, 6, 2) at times
+    ``t`` (s): ``frames`` of them, spread over the first two thirds of its last gait cycle
+    (half the samples). A few kB, where the whole run is tens of MB to send to a worker."""
     n = len(t)
     picks = [n - 1 - (n // 2) + (n // 2) * j // frames for j in range(frames)]
-    for ax, k in zip(np.atleast_1d(axes), picks):
+    return obs[picks].copy(), t[picks].copy()
+
+
+def stick_picture(obs: np.ndarray, t: np.ndarray, l1: float, path: Path, title: str = ""
+                  ) -> Path:
+    """The robot walking, seen from its left: one panel per sample of ``obs`` (F, 9, 6, 2)
+    at times ``t`` (s) (:func:`stick_samples` picks them): hips, knees, feet, the body
+    line, ground forces as arrows, in the world frame."""
+    from hexapod_metrics.core.figure import FORCE_SCALE, stick_figure
+
+    frames = len(t)
+    fig = _figure(figsize=(3.2 * frames, 2.4), dpi=110)
+    axes = fig.subplots(1, frames, sharey=True)
+    for ax, k in zip(np.atleast_1d(axes), range(frames)):
         f = stick_figure(obs[k], l1)
         for leg in range(f.hip.shape[0]):
             c = "tab:blue" if leg % 2 == 0 else "tab:red"
@@ -321,4 +329,4 @@ def advantage_map(rates: Sequence[float], percents: Sequence[float],
 
 
 __all__ = ["LABELS", "MAP_CODES", "TIME_SIGNALS", "advantage_map", "label", "rate_plot",
-           "sweep_plot", "time_plot", "time_signals"]
+           "stick_picture", "stick_samples", "sweep_plot", "time_plot", "time_signals"]

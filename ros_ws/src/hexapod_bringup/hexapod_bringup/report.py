@@ -534,9 +534,10 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
         ("Tm11", "fig06_torque_11.png", "Fig. 6: T_m11, T_max = 400 N m"),
         ("Tm12", "fig07_torque_12.png", "Fig. 7: T_m12, T_max = 400 N m")],
         _verdict_line(base_conv), drawer)
-    plots.stick_picture(base["pd_pf"].run.obs, base["pd_pf"].run.t, p.robot.leg_length_1,
-                        out / "stick_figure.png", "PD-P&F, base case: the last gait cycle "
-                        "(blue: left legs, red: right legs, green: ground forces)")
+    drawer.draw(plots.stick_picture,
+                *plots.stick_samples(base["pd_pf"].run.obs, base["pd_pf"].run.t),
+                p.robot.leg_length_1, out / "stick_figure.png", "PD-P&F, base case: the last "
+                "gait cycle (blue: left legs, red: right legs, green: ground forces)")
     e1_md = (["## E1: base experiment (T_max = 400 N m)", ""]
              + _indices_table(base_pts, base_conv)
              + ["", "Dashed: the same runs at dt/4.", ""] + [f"![{f}]({f})" for f in figs]
