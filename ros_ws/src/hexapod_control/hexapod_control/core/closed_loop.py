@@ -354,22 +354,14 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
     ref = batch_reference(p0, n)
     obs = np.full((len(cases), n + 1 - k_a) + OBS_SHAPE, np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
-    compiled = [batch_code(c) is not None for c in cases]
-    for j, c in enumerate(cases):  # plug-in laws: one run each
-        if not compiled[j]:
-            r = run(c.params, c.controller, duration)
-            obs[j] = r.obs[k_a:]
-            ok[j] = r.diverged_at is None
-    fast = [j for j, f in enumerate(compiled) if f]
-    no_sums, no_flags = np.zeros((0, ACC_SIZE)), np.zeros(0, dtype=np.bool_)
-    if len(fast) == len(cases):  # the usual batch: the kernel writes straight into obs
-        _run_compiled_batch(cases, ref, n, k_a, obs, ok, -1, no_sums, no_flags)
-    elif fast:
-        sub_obs = np.full((len(fast),) + obs.shape[1:], np.nan)
-        sub_ok = np.zeros(len(fast), dtype=np.bool_)
-        _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, sub_obs, sub_ok, -1,
-                            no_sums, no_flags)
-        obs[fast], ok[fast] = sub_obs, sub_ok
+
+    def plug_in(j: int, r: RunResult) -> None:
+        obs[j] = r.obs[k_a:]
+        ok[j] = r.diverged_at is None
+
+    fast = _run_plug_ins(cases, duration, plug_in)
+    _run_compiled_rows(cases, fast, ref, n, k_a, -1, obs, ok, np.zeros((0, ACC_SIZE)),
+                       np.zeros(0, dtype=np.bool_))
     window_ref = Reference(*(_read_only(a[k_a:]) for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
 
@@ -400,24 +392,17 @@ def score_batch(cases: Sequence[Case], duration: float, window: tuple[int, int]
     sums = np.full((len(cases), ACC_SIZE), np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
     finite = np.ones(len(cases), dtype=np.bool_)
-    compiled = [batch_code(c) is not None for c in cases]
-    for j, c in enumerate(cases):  # plug-in laws: one run each, scored from its samples
-        if not compiled[j]:
-            r = run(c.params, c.controller, duration)
-            w = r.obs[k_a:k_b + 1]
-            accumulate(sums[j], w[:, O_TQ], w[:, O_THV], w[:, O_HF], w[:, O_HP],
-                       ref.hip[k_a:k_b + 1], w[:, O_FP], ref.foot[k_a:k_b + 1])
-            ok[j] = r.diverged_at is None
-            finite[j] = bool(np.all(np.isfinite(w)))
-    fast = [j for j, f in enumerate(compiled) if f]
-    if fast:
-        no_obs = np.empty((len(fast), 0) + OBS_SHAPE)
-        sub_sums = np.full((len(fast), ACC_SIZE), np.nan)
-        sub_ok = np.zeros(len(fast), dtype=np.bool_)
-        sub_finite = np.ones(len(fast), dtype=np.bool_)
-        _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, no_obs, sub_ok, k_b,
-                            sub_sums, sub_finite)
-        sums[fast], ok[fast], finite[fast] = sub_sums, sub_ok, sub_finite
+
+    def plug_in(j: int, r: RunResult) -> None:  # scored from its samples
+        w = r.obs[k_a:k_b + 1]
+        accumulate(sums[j], w[:, O_TQ], w[:, O_THV], w[:, O_HF], w[:, O_HP],
+                   ref.hip[k_a:k_b + 1], w[:, O_FP], ref.foot[k_a:k_b + 1])
+        ok[j] = r.diverged_at is None
+        finite[j] = bool(np.all(np.isfinite(w)))
+
+    fast = _run_plug_ins(cases, duration, plug_in)
+    _run_compiled_rows(cases, fast, ref, n, k_a, k_b, np.empty((len(cases), 0) + OBS_SHAPE),
+                       ok, sums, finite)
     dt = p0.sim.control_period
     return ScoredBatch(tuple(cases), (k_a * dt, k_b * dt), sums, ok & finite)
 
@@ -446,6 +431,38 @@ def batch_reference(p: HexapodParams, n: int) -> Reference:
             _BATCH_REFERENCES.pop(next(iter(_BATCH_REFERENCES)))
         _BATCH_REFERENCES[key] = ref
     return ref
+
+
+def _run_plug_ins(cases: Sequence[Case], duration: float,
+                  each: Callable[[int, RunResult], None]) -> list[int]:
+    """Run the cases whose law is plain Python (plug-ins) one by one, ``each(j, result)``
+    for case j; the indices of the others (compiled laws: one batch)."""
+    fast = []
+    for j, c in enumerate(cases):
+        if batch_code(c) is None:
+            each(j, run(c.params, c.controller, duration))
+        else:
+            fast.append(j)
+    return fast
+
+
+def _run_compiled_rows(cases: Sequence[Case], fast: Sequence[int], ref: Reference, n: int,
+                       k_a: int, k_b: int, obs: np.ndarray, ok: np.ndarray, sums: np.ndarray,
+                       finite: np.ndarray) -> None:
+    """:func:`_run_compiled_batch` on the cases ``fast`` (indices into ``cases``), into those
+    rows of ``obs``, ``ok``, ``sums`` and ``finite`` (an array of no rows stays unused);
+    straight into them when every case is compiled (the usual batch)."""
+    if len(fast) == len(cases):
+        _run_compiled_batch(cases, ref, n, k_a, obs, ok, k_b, sums, finite)
+        return
+    if not fast:
+        return
+    rows = [a[fast] if len(a) else a for a in (obs, ok, sums, finite)]
+    _run_compiled_batch([cases[j] for j in fast], ref, n, k_a, rows[0], rows[1], k_b,
+                        rows[2], rows[3])
+    for a, r in zip((obs, ok, sums, finite), rows):
+        if len(a):
+            a[fast] = r
 
 
 def _run_compiled_batch(cases: Sequence[Case], ref: Reference, n: int, k_a: int,
