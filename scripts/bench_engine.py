@@ -34,6 +34,8 @@ import sys
 import time
 from typing import Any, Callable
 
+import host_speed
+
 import numpy as np
 
 try:
@@ -363,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
           "Python {python}, numpy {numpy}, numba {numba} ({numba_threads} threads), "
           "mujoco {mujoco}".format(**info))
     print(f"         {info['platform']}; load average before: "
-          + " ".join(f"{x:.2f}" for x in info["loadavg"]))
+          + " ".join(f"{x:.2f}" for x in info["loadavg"]) + f"; {host_speed.describe()}")
     integ = getattr(p.sim, "integrator", "semi_implicit_euler")
     print(f"base case: dt = {p.sim.dt:g} s, control period = {p.sim.control_period:g} s, "
           f"duration = {p.run.duration:g} s, integrator = {integ}")
@@ -469,7 +471,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{k} {v:.0f} s" for k, v in raw["section_wall_s"].items()))
     raw["loadavg_after"] = os.getloadavg()
     print(f"load average after: {' '.join(f'{x:.2f}' for x in raw['loadavg_after'])}; "
-          f"benchmark wall time {time.perf_counter() - t_start:.0f} s")
+          f"benchmark wall time {time.perf_counter() - t_start:.0f} s; "
+          f"{host_speed.describe()}")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(raw, fh, indent=1, default=float)

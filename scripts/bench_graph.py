@@ -43,6 +43,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+import host_speed
 from project_env import reexec_in_env
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,7 +144,8 @@ def main() -> int:
     ap.add_argument("--auth", choices=("on", "off"), default="on",
                     help="message authentication of the graph (default on)")
     args = ap.parse_args()
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, "
+    print(f"machine: {os.cpu_count()} cores, {host_speed.describe()}, "
+          f"load average {os.getloadavg()[0]:.2f}, "
           f"authentication {args.auth}, recorder at nice 10; control path under SCHED_FIFO "
           f"{args.s4_rt_priority} in S4, {args.rt_priority} in S5 (0 = normal scheduling)")
     base = 150 + os.getpid() % 80
@@ -183,7 +185,7 @@ def main() -> int:
                 print(f"S5 realtime ticks on time (1 kHz), median of {len(rows)}: "
                       f"{statistics.median(pct):.2f} %  (target >= 99 %); missed "
                       f"{[r['missed'] for r in rows]}, late {[r['late'] for r in rows]}")
-    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    print(f"load average after: {os.getloadavg()[0]:.2f}; {host_speed.describe()}")
     return 0
 
 

@@ -32,6 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import host_speed
+
 TARGET_S = {"quick": 120.0, "full": 600.0}
 
 
@@ -130,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     kind = "full" if args.full else "quick"
     backends = {"processes": ["--backend", "processes"],
                 f"dask local:{args.workers}": ["--dask", f"local:{args.workers}"]}
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; "
+    print(f"machine: {os.cpu_count()} cores, {host_speed.describe()}, "
+          f"load average {os.getloadavg()[0]:.2f}; "
           f"reproduce {'--quick' if kind == 'quick' else '(full)'}, nice {args.nice}",
           flush=True)
     rows: dict[str, list[dict[str, float]]] = {k: [] for k in backends}
@@ -155,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         cpu = statistics.median(r["cpu"] for r in rs)
         print(f"R reproduce {kind} on {name}: median wall {wall:.1f} s, CPU {cpu:.1f} s over "
               f"{len(rs)} runs (target < {TARGET_S[kind]:g} s; gap {wall / TARGET_S[kind]:.2f})")
-    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    print(f"load average after: {os.getloadavg()[0]:.2f}; {host_speed.describe()}")
     return 0 if same else 1
 
 

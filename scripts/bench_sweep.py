@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import host_speed
 from project_env import reexec_in_env
 
 BATCHED = r"""
@@ -104,6 +105,7 @@ def bench(args: argparse.Namespace) -> int:
     rows: dict[str, list[float]] = {"user": [], "s2": [], "s2_recording": [], "sweep": [],
                                     "start": []}
     info: dict[str, float] = {}
+    print(host_speed.describe(), flush=True)
     with tempfile.TemporaryDirectory() as out:
         for r in range(args.runs):
             _, out_text = step("the batched engine's run", [
@@ -133,6 +135,7 @@ def bench(args: argparse.Namespace) -> int:
     print(f"  ratio to S2's rate: {rate / med['s2']:.2f} (target 0.8); to the same cases in one "
           f"batch: {rate / med['user']:.2f}; to S2's cases recorded: "
           f"{rate / med['s2_recording']:.2f}")
+    print(host_speed.describe())
     return 0
 
 
