@@ -229,15 +229,18 @@ def test_an_inline_chunk_gives_every_numba_thread_blocks_to_run():
     assert len(block_plan(np.full(size, 2), threads)) >= 2 * threads
 
 
-def test_worker_chunks_are_wide_but_leave_every_worker_two():
-    """Single-threaded workers get chunks of 8 to 32 cases (a block of 32 runs faster a case),
-    at least two per worker where there are cases enough."""
-    from hexapod_bringup.core.parallel import (CHUNK_CASES, MAX_CHUNK_CASES, chunk_size_of,
-                                               run_cases)
+def test_worker_chunks_are_wide_but_leave_every_worker_the_same_number():
+    """Single-threaded workers get chunks of up to 32 cases (a block of 32 runs faster a
+    case), the same number for every worker: two each where each keeps 8 cases, else one."""
+    from hexapod_bringup.core.parallel import MAX_CHUNK_CASES, chunk_size_of, run_cases
 
     assert chunk_size_of(ProcessBackend(2), 256) == MAX_CHUNK_CASES == 32
     assert chunk_size_of(ProcessBackend(2), 42) == 11  # the default 21-point sweep: 4 chunks
-    assert chunk_size_of(ProcessBackend(2), 20) == CHUNK_CASES
+    assert chunk_size_of(ProcessBackend(2), 36) == 9  # 4 chunks
+    assert chunk_size_of(ProcessBackend(2), 20) == 10  # 2 chunks, not 8, 8 and 4
+    assert chunk_size_of(ProcessBackend(2), 17) == 9  # 9 and 8, not 8, 8 and 1
+    assert chunk_size_of(ProcessBackend(2), 9) == 5  # 5 and 4, not 8 and 1
+    assert chunk_size_of(ProcessBackend(2), 1) == 1
     assert chunk_size_of(ProcessBackend(8), 256) == 16
     assert chunk_size_of(MemoBackend(ProcessBackend(2)), 256) == 32
 

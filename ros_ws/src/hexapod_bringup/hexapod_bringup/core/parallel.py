@@ -345,17 +345,23 @@ def local_submit(backend: object) -> Callable[[Callable[[Any], Any], Any], "Futu
 
 def chunk_size_of(backend: object, cases: int = 0) -> int:
     """Cases per chunk when ``cases`` cases run on ``backend``: its own ``chunk_size`` (or
-    ``chunk_size_for(cases)``) if it has one; else, for single-threaded workers, at least two
-    chunks per worker where there are cases enough, each of :data:`CHUNK_CASES` to
-    :data:`MAX_CHUNK_CASES` cases."""
+    ``chunk_size_for(cases)``) if it has one; else, for single-threaded workers, the same
+    number of chunks for every worker (one or two each, more where a chunk would exceed
+    :data:`MAX_CHUNK_CASES`), two only where each keeps :data:`CHUNK_CASES` cases: chunks of
+    8, 8 and 1 left a worker idle while the other ran 8 (``reproduce``'s 9 PD^alpha runs,
+    plain Python one by one: 5 and 4 now)."""
     own = getattr(backend, "chunk_size_for", None)
     if own is not None:
         return int(own(cases))
     fixed = getattr(backend, "chunk_size", None)
     if fixed is not None:
         return int(fixed)
+    if cases <= 0:
+        return CHUNK_CASES
     workers = max(1, int(getattr(backend, "workers", 1)))
-    return min(MAX_CHUNK_CASES, max(CHUNK_CASES, -(-cases // (2 * workers))))
+    each = max(1, min(2, cases // (workers * CHUNK_CASES)),
+               -(-cases // (workers * MAX_CHUNK_CASES)))
+    return -(-cases // (workers * each))
 
 
 def run_cases(cases: Sequence[Case], duration: float, backend: Backend,
