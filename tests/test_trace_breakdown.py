@@ -112,3 +112,14 @@ def test_a_node_forked_from_a_server_without_the_variable_traces_from_its_own_en
                    env={k: v for k, v in os.environ.items() if k != tr.TRACE_ENV})
     rows = load(tmp_path)["forked"]
     assert rows.shape == (1, 6) and list(rows[0, :3]) == [tr.LAW0, ID[T.JOINT_COMMANDS], 9]
+
+
+def test_an_unwritable_trace_folder_costs_one_line_and_not_the_run(tmp_path):
+    missing = tmp_path / "no" / "such" / "folder"
+    code = ("from hexapod_common.core import trace as t; t.name_process('probe'); "
+            "t.TRACER.mark(t.LAW0, '/hexapod/joint_commands', 7); print('ran')")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, tr.TRACE_ENV: str(missing)})
+    assert r.returncode == 0 and r.stdout.strip() == "ran"
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"trace: cannot write {missing}")

@@ -206,7 +206,7 @@ def sweep_plots(figures: Sequence[SweepFigure], backend: Any = None) -> list[Pat
     take half the wall time on two cores), else here."""
     drawer = Drawer(backend)
     for res, names, path, title, kw in figures:
-        drawer.draw(sweep_plot, SweepCurves.of(res, names), names, path, title, **kw)
+        drawer.sweep(res, names, path, title, **kw)
     drawer.wait()
     return [Path(path) for _, _, path, _, _ in figures]
 
@@ -236,6 +236,12 @@ class Drawer:
             fn(*args, **kw)
         else:
             self._pending.append(self._submit(_draw_job, (fn, args, kw)))
+
+    def sweep(self, res: SweepResult, names: Sequence[str], path: Path, title: str,
+              **kw: Any) -> None:
+        """:func:`sweep_plot` of ``res`` through :meth:`draw`, sending its curves (a few kB),
+        not the whole result."""
+        self.draw(sweep_plot, SweepCurves.of(res, names), names, path, title, **kw)
 
     def wait(self) -> None:
         """Every figure drawn so far is written (the first failure raised)."""

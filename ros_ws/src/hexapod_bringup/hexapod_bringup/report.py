@@ -437,8 +437,8 @@ def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backe
             md.append(f"| {t:g} | {pct:g} | {vs[0]} | {vs[1]} |")
         fname = f"fig_e7_ground_tmax{t:g}.png"
         names = ("E_av", "eps_xH", "eps_yH")
-        drawer.draw(plots.sweep_plot, plots.SweepCurves.of(res, names), names, out / fname,
-                    f"E7: PD^α, PD-P, PD-P&F over the ground, T_max = {t:g} N m")
+        drawer.sweep(res, names, out / fname,
+                     f"E7: PD^α, PD-P, PD-P&F over the ground, T_max = {t:g} N m")
         figs.append(f"![{fname}]({fname})")
         sweeps_doc[f"tmax{t:g}"] = res.rows()
     md += [""] + figs + [""]
@@ -447,9 +447,8 @@ def _e7_section(p400: HexapodParams, plan: Plan, duration: float, backend: Backe
                   progress=progress("E7 alpha (runs)", len(plan.e7_alphas) * RUNS))
     fname = "fig_e7_alpha.png"
     names = ("E_av", "T_L", "eps_xH", "eps_yH")
-    drawer.draw(plots.sweep_plot, plots.SweepCurves.of(alpha, names), names, out / fname,
-                "E7: PD^α's indices against α (base case)", x_scale=1.0,
-                x_label="α (order of the derivative)", log_x=False)
+    drawer.sweep(alpha, names, out / fname, "E7: PD^α's indices against α (base case)",
+                 x_scale=1.0, x_label="α (order of the derivative)", log_x=False)
     md += [f"**Against α** (base case, gains above): ![{fname}]({fname})", ""]
     doc.update({"ground": sweeps_doc, "alpha": alpha.rows()})
     return md, doc
@@ -563,8 +562,8 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
                                            (("eps_xH", "eps_yH"), "hip errors"),
                                            (("eps_xF", "eps_yF"), "foot errors")]):
             fname = f"fig{k + j:02d}_{'_'.join(names)}_tmax{t_max:g}.png"
-            drawer.draw(plots.sweep_plot, plots.SweepCurves.of(res, names), names, out / fname,
-                        f"Fig. {k + j}: {what} vs ground, T_max = {t_max:g} N m")
+            drawer.sweep(res, names, out / fname,
+                         f"Fig. {k + j}: {what} vs ground, T_max = {t_max:g} N m")
             e2_md.append(f"![{fname}]({fname})")
         e2_md.append("")
 
@@ -575,9 +574,8 @@ def reproduce(p: HexapodParams, out: Path, backend: Backend, plan: Plan | None =
     _write_rows(out / "e3_tmax_sweep.csv", e3.rows())
     fname = "fig_e3_tracking_vs_tmax.png"
     names = ("eps_xH", "eps_yH", "T_L")
-    drawer.draw(plots.sweep_plot, plots.SweepCurves.of(e3, names), names, out / fname,
-                "E3: saturation sweep at the base ground", x_scale=1.0,
-                x_label="T_max (N m)", log_x=False)
+    drawer.sweep(e3, names, out / fname, "E3: saturation sweep at the base ground",
+                 x_scale=1.0, x_label="T_max (N m)", log_x=False)
     strong_p = p.with_values(**{"actuator.t_max": plan.strong_t_max})
     strong_conv = dict(zip(CONTROLLERS, check_cases(
         [Case(strong_p, c) for c in CONTROLLERS], duration, backend,
