@@ -6,7 +6,8 @@ the graph's Fast DDS profile: a node reading joint states and references answers
 matched" naming the joint states while no one publishes them (a reference publisher does
 not count: the sim does not write references), then "matched" once a joint-state writer
 has matched on its side, counting the writers its command and reference readers matched;
-a node without such a reader is ready at once. Answers carry the
+a node without such a reader is ready at once, and one that writes commands counts the
+readers its writer matched. Answers carry the
 run key's tag: an impostor's answer (no key), a genuine answer with its flag flipped,
 moved to another node or replayed, and garbage (empty, no tag, a tag that is not hex, a
 zero tag, 100 kB of text, odd characters) are dropped and counted. The graph-level case (the sim
@@ -93,6 +94,16 @@ end = time.monotonic() + 30
 while subs[0].get_publisher_count() < 1 and time.monotonic() < end:
     ex.spin_once(timeout_sec=0.05)
 out["after"] = ask("metrics")
+commander = rclpy.create_node("commander")  # a controller: it writes commands
+cmd_pub = commander.create_publisher(JointState, T.JOINT_COMMANDS,
+                                     C.TOPIC_QOS[T.JOINT_COMMANDS].publisher())
+inputs_matched.offer(commander, lambda: [], InputGuard(commander, commander.get_logger()),
+                     lambda: [cmd_pub])
+ex.add_node(commander)
+end = time.monotonic() + 30
+while cmd_pub.get_subscription_count() < 1 and time.monotonic() < end:
+    ex.spin_once(timeout_sec=0.05)
+out["commander"] = ask("commander")
 print(json.dumps(out))
 """
 
@@ -113,7 +124,9 @@ def test_a_reader_is_ready_once_its_sim_topics_have_matched_a_writer(tmp_path):
                    "idle": [True, "/hexapod/reference=0"],  # ready, its reader counted
                    "impostor": [True, None],
                    "reference_only": [False, "/hexapod/joint_states"],
-                   "after": [True, "/hexapod/joint_commands=0,/hexapod/reference=1"]}
+                   "after": [True, "/hexapod/joint_commands=0,/hexapod/reference=1"],
+                   # its command writer has matched the reader of "metrics" on its side
+                   "commander": [True, "writer:/hexapod/joint_commands=1"]}
     assert drops == {"dropped": "10",
                      "dropped /markers/inputs_matched (unauthenticated)": "1",
                      "dropped /metrics/inputs_matched (unauthenticated)": "7",  # flipped, garbage
@@ -199,3 +212,16 @@ def test_a_ready_answer_counts_command_writers_and_the_sim_waits_for_all_of_them
     both = {"/hexapod/joint_commands": 1, "/hexapod/reference": 1}
     assert behind("/hexapod/joint_commands=1,/hexapod/reference=0", both) == (
         "readers of /hexapod/reference matched 0 of 1 writers")
+
+
+def test_a_controllers_answer_counts_its_command_writers_readers_and_the_sim_waits():
+    """A controller whose command writer has not matched every command reader the sim sees
+    (the recorder's volatile one) on its side is not ready: the recorder would lose its
+    first commands (a lockstep bag once lacked PD-P&F's first 106)."""
+    from hexapod_common.runtime.inputs_matched import WRITER, behind
+
+    expected = {"/hexapod/joint_commands": 0, WRITER + "/hexapod/joint_commands": 2}
+    assert behind("writer:/hexapod/joint_commands=2", expected) == ""
+    assert behind("/hexapod/reference=1,writer:/hexapod/joint_commands=1", expected) == (
+        "its writer of /hexapod/joint_commands matched 1 of 2 readers")
+    assert behind("/hexapod/joint_commands=5", expected) == ""  # a recorder: no writer

@@ -128,7 +128,9 @@ class ControllerNode(LifecycleNode):
                            "in_charge": str(self.in_charge).lower()})
         self.cmd_signer = self.guard.signer(T.JOINT_COMMANDS)
         self.loop = HotLoop(self)
-        inputs_matched.offer(self, self.loop.subscriptions, self.guard)  # asked before tick 0
+        # asked before tick 0; the command writer's matched readers counted (inputs_matched)
+        inputs_matched.offer(self, self.loop.subscriptions, self.guard,
+                             lambda: () if self.pub is None else (self.pub,))
         self.js_codec = C.CODECS[T.JOINT_STATES]
         self.ff_codec = C.CODECS[T.FOOT_FORCES]
         self.ref_codec = C.CODECS[T.REFERENCE]

@@ -336,8 +336,9 @@ class SimNode(Node):
         """Wait (at most INPUTS_TIMEOUT s) until every node of ``wait_for`` that reads this
         node's per-tick topics says its readers have matched our writers on its side
         (runtime/inputs_matched.py: our side matching first is not enough, and the samples of
-        ticks sent before the other side matched were lost to it). Starts anyway, with an
-        error naming who is not ready, after the timeout."""
+        ticks sent before the other side matched were lost to it), and every controller
+        says its command writer has matched every command reader this node sees. Starts
+        anyway, with an error naming who is not ready, after the timeout."""
         from std_srvs.srv import Trigger
 
         names = [n for n in self.wait_for
@@ -375,7 +376,9 @@ class SimNode(Node):
                         short = inputs_matched.behind(
                             text, {T.JOINT_COMMANDS: max(commander,
                                                          self.cmd_sub.get_publisher_count()),
-                                   T.REFERENCE: self.count_publishers(T.REFERENCE)})
+                                   T.REFERENCE: self.count_publishers(T.REFERENCE),
+                                   inputs_matched.WRITER + T.JOINT_COMMANDS:
+                                       self.count_subscribers(T.JOINT_COMMANDS)})
                         if short:
                             waiting[name] = short
                         else:

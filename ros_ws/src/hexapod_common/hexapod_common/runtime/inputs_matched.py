@@ -17,7 +17,13 @@ writers are the controllers and the trajectory generator, not the sim, and the s
 until each count reaches the number of such writers it sees itself (:func:`behind`). A
 recorder that matched a joined controller ~60 ms after tick 0 had lost its first commands;
 a PD-P&F whose reference reader matched the generator late left tick 0 unanswered for the
-0.5 s lockstep timeout (208 ticks held at 10 kHz).
+0.5 s lockstep timeout (208 ticks held at 10 kHz). A node that writes commands (a
+controller) also counts, as ``writer:/hexapod/joint_commands=N``, the readers its command
+writer has matched on its side, and the sim waits until that reaches the number of command
+readers it sees: the recorder reads commands with a volatile reader (so that a controller
+publishing with rclpy's defaults is heard), which gets nothing a writer sent before the
+*writer* had matched it, and a lockstep bag once lacked PD-P&F's first 106 commands although
+the recorder's reader had matched the controller's writer on the recorder's side.
 
 The answer is authenticated like the graph's messages (core/msg_auth.py): with the run's key
 the message ends with ``|`` and the hex trailer of the answer (the success flag and the
@@ -31,6 +37,7 @@ from __future__ import annotations
 from typing import Any, Callable, Iterable, Mapping
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.service import Service
 from rclpy.subscription import Subscription
 
@@ -46,6 +53,11 @@ SIM_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
 #: matched writers a ready answer counts: tick 0 waits until they have matched as many
 #: writers as the sim sees (its command reader's, the graph's reference writers).
 COUNTED_TOPICS = (T.JOINT_COMMANDS, T.REFERENCE)
+#: Topics whose writer (of the answering node) a ready answer reports, as ``WRITER`` + topic,
+#: with the number of readers it has matched: tick 0 waits until that is every reader of the
+#: topic the sim sees.
+WRITTEN_TOPICS = (T.JOINT_COMMANDS,)
+WRITER = "writer:"
 
 
 def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
@@ -54,23 +66,33 @@ def unmatched(subscriptions: Iterable[Subscription]) -> list[str]:
                    if s.topic_name in SIM_TOPICS and s.get_publisher_count() < 1})
 
 
-def counted(subscriptions: Iterable[Subscription]) -> str:
+def counted(subscriptions: Iterable[Subscription],
+            publishers: Iterable[Publisher] = ()) -> str:
     """A ready answer's text: ``topic=writers`` of each subscription to a topic of
-    :data:`COUNTED_TOPICS`, comma-separated (empty without such subscriptions)."""
-    return ",".join(sorted(f"{s.topic_name}={s.get_publisher_count()}" for s in subscriptions
-                           if s.topic_name in COUNTED_TOPICS))
+    :data:`COUNTED_TOPICS` and ``writer:topic=readers`` of each publisher of a topic of
+    :data:`WRITTEN_TOPICS`, comma-separated (empty without such endpoints)."""
+    items = [f"{s.topic_name}={s.get_publisher_count()}" for s in subscriptions
+             if s.topic_name in COUNTED_TOPICS]
+    items += [f"{WRITER}{p.topic_name}={p.get_subscription_count()}" for p in publishers
+              if p.topic_name in WRITTEN_TOPICS]
+    return ",".join(sorted(items))
 
 
 def behind(text: str, expected: Mapping[str, int]) -> str:
     """Why a ready answer's counts (:func:`counted`'s ``text``) fall short of ``expected``
-    writers per topic; empty if they do not."""
+    writers per topic (readers per ``writer:`` topic); empty if they do not."""
     short = []
     for item in filter(None, text.split(",")):
         topic, _, count = item.partition("=")
         if not count.isdigit():
             return f"a malformed answer ({text[:80]!r})"
         if int(count) < expected.get(topic, 0):
-            short.append(f"readers of {topic} matched {count} of {expected[topic]} writers")
+            if topic.startswith(WRITER):
+                short.append(f"its writer of {topic[len(WRITER):]} matched {count} of "
+                             f"{expected[topic]} readers")
+            else:
+                short.append(f"readers of {topic} matched {count} of {expected[topic]} "
+                             "writers")
     return "; ".join(short)
 
 
@@ -107,10 +129,12 @@ def opened(guard: InputGuard, name: str, success: bool, message: str) -> str | N
 
 
 def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]],
-          guard: InputGuard) -> Service:
+          guard: InputGuard,
+          publishers: Callable[[], Iterable[Publisher]] = lambda: ()) -> Service:
     """Create ``node``'s ``~/inputs_matched`` service; ``subscriptions()`` gives the node's
-    current subscriptions (its hot loop's); answers are signed with ``guard``'s key. Call
-    the loop's ``refresh()`` afterwards."""
+    current subscriptions (its hot loop's), ``publishers()`` its current writers of
+    :data:`WRITTEN_TOPICS`; answers are signed with ``guard``'s key. Call the loop's
+    ``refresh()`` afterwards."""
     from std_srvs.srv import Trigger
 
     signer = guard.signer(service_name(node.get_name()))
@@ -120,10 +144,10 @@ def offer(node: Node, subscriptions: Callable[[], Iterable[Subscription]],
         waiting = unmatched(subs)
         response.success = not waiting
         response.message = seal(signer, response.success,
-                                ",".join(waiting) if waiting else counted(subs))
+                                ",".join(waiting) if waiting else counted(subs, publishers()))
         return response
     return node.create_service(Trigger, service_name(node.get_name()), answer)
 
 
-__all__ = ["COUNTED_TOPICS", "SERVICE", "SIM_TOPICS", "behind", "counted", "offer", "opened",
-           "seal", "service_name", "unmatched"]
+__all__ = ["COUNTED_TOPICS", "SERVICE", "SIM_TOPICS", "WRITER", "WRITTEN_TOPICS", "behind",
+           "counted", "offer", "opened", "seal", "service_name", "unmatched"]
