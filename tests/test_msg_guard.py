@@ -67,6 +67,29 @@ def test_a_replayed_message_is_rejected_and_senders_are_kept_apart(key):
         v.verify(a.sign(b"three, too late"))
 
 
+def test_messages_that_never_arrived_are_counted_per_sender(key):
+    """The holes in each sender's sequence numbers between the first and the newest message
+    accepted are the messages lost on the way (a late one fills its hole); those before a
+    sender's first one (a reader that matched late) and refused copies do not count."""
+    a, b = Signer(key, "/t"), Signer(key, "/t")
+    v = Verifier(key, "/t")
+    sent = [a.sign(f"a{i}".encode()) for i in range(10)]
+    late_joiner = [b.sign(f"b{i}".encode()) for i in range(5)]
+    assert v.missing() == 0
+    for k in (3, 4, 7, 9):  # the first three were sent before this reader matched
+        v.verify(sent[k])
+    assert v.missing() == 3  # 5, 6, 8
+    v.verify(sent[6])  # one of them after all, late
+    assert v.missing() == 2
+    with pytest.raises(Rejected):
+        v.verify(sent[6])  # a copy fills nothing
+    assert v.missing() == 2
+    v.verify(late_joiner[4])
+    assert v.missing() == 2  # a sender's first message opens its span
+    v.verify(late_joiner[2])  # an older one overtaken by its first: the span starts there
+    assert v.missing() == 3
+
+
 def test_key_file_is_private_and_checked(tmp_path):
     path = new_key_file(tmp_path)
     assert stat.S_IMODE(path.stat().st_mode) == 0o600

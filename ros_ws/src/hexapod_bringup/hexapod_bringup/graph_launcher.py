@@ -39,6 +39,7 @@ from typing import Any, Sequence
 import yaml
 
 from hexapod_control.core.waits import parse as parse_waits
+from hexapod_common.core import topics as T
 from hexapod_common.core.errors import HexapodError
 from hexapod_common.core.controller_names import node_of
 from hexapod_sim.core.uneven_ground import check_seed, check_spread
@@ -74,6 +75,8 @@ DISK_FULL_BYTES = 1 << 20
 #: Exit code of a recorder whose bag could not be written to the end (disk full, quota, I/O
 #: error): metrics_node.EXIT_RECORDING_FAILED; its log line says which.
 RECORDER_WRITE_FAILED_EXIT = 3
+#: Exit code of a recorder to which messages never arrived: metrics_node.EXIT_MESSAGES_LOST.
+RECORDER_LOST_EXIT = 4
 
 
 class LaunchError(HexapodError):
@@ -345,6 +348,10 @@ class Launcher:
                   f"({HOW_TO_PERMIT}): the control path runs with normal scheduling and "
                   f"realtime mode may miss deadlines", file=sys.stderr, flush=True)
             return 0
+        if self.p.sim.mode == "lockstep":
+            print("run_graph: warning: a lockstep graph under SCHED_FIFO runs faster than "
+                  "real time at the recorder's expense: starved of CPU, it can lose messages "
+                  "(then said at the end, exit 4)", file=sys.stderr, flush=True)
         print(f"run_graph: SCHED_FIFO priority {priority} for the control path "
               f"({', '.join(RT_NODES)}: main and Fast DDS threads) and the other nodes' Fast "
               f"DDS threads", flush=True)
@@ -414,8 +421,10 @@ class Launcher:
                 self.outcome.add("disk full", f"the recorder ran out of disk space ({how}; "
                                  f"log: {log})")
             elif during_run or code != 0:
-                what = (" (its bag could not be written to the end)"
-                        if code == RECORDER_WRITE_FAILED_EXIT else "")
+                what = {RECORDER_WRITE_FAILED_EXIT: " (its bag could not be written to the "
+                                                    "end)",
+                        RECORDER_LOST_EXIT: " (messages never reached it: the bag lacks "
+                                            "them, its log says which)"}.get(code, "")
                 self.outcome.add("recorder failed", f"the recorder (metrics) {how}{what} "
                                  f"{'during the run' if during_run else 'at the end'} "
                                  f"(log: {log})")
@@ -495,6 +504,11 @@ class Launcher:
             if summary["missed"] or summary["fallback_episodes"]:
                 lines += self.controller_waits()
         lines += inputs_lines(summary, self.bag / "indices.json")
+        short = bag_shortfall(summary, self.bag / "indices.json")
+        if short:
+            self.outcome.add("recorder failed", "the bag lacks messages that never reached "
+                             f"the recorder: {short} (log: {self.logs / 'metrics.log'})")
+            lines.append(f"  bag: INCOMPLETE: {short}")
         lines += indices_lines(self.bag / "indices.json")
         return lines
 
@@ -551,6 +565,35 @@ def inputs_lines(summary: dict[str, Any] | None, indices: Path) -> list[str]:
     lines.append("  publishers outside the graph: " + ("; ".join(
         f"{t}: {', '.join(sorted(n))}" for t, n in sorted(outside.items())) or "none"))
     return lines
+
+
+#: Topics the sim publishes once per tick from tick 0: a bag of a run lacks none of them.
+PER_TICK_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
+
+
+def bag_shortfall(summary: dict[str, Any] | None, indices: Path) -> str:
+    """What the bag lacks of the sim's per-tick messages (its summary's last tick against
+    the recorder's counts in ``indices.json``, the recorder waited for before tick 0), with
+    what the recorder counted as lost on the way (holes in the senders' sequences); empty if
+    nothing, or if either file is missing (reported elsewhere)."""
+    if summary is None:
+        return ""
+    try:
+        doc = json.loads(indices.read_text())
+    except (OSError, ValueError):
+        return ""
+    expected = int(summary["tick"]) + 1
+    held = doc.get("messages") or {}
+    short = [f"{t} {held.get(t, 0)} of {expected}" for t in PER_TICK_TOPICS
+             if held.get(t, 0) < expected]
+    lost = (doc.get("recording") or {}).get("lost_in_transit") or {}
+    if not short and not lost:
+        return ""
+    text = ", ".join(short) if short else "every tick's states"
+    if lost:
+        text += ("; lost on the way (holes in the publishers' sequences): "
+                 + ", ".join(f"{t} {n}" for t, n in sorted(lost.items())))
+    return text
 
 
 def _changes_in(changes: list[dict[str, Any]], t0: float, t1: float) -> list[dict[str, Any]]:

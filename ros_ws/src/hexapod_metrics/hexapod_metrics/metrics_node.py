@@ -51,6 +51,8 @@ from .core.recording import ParamRecorder, indices_status
 
 #: Exit code of a recorder whose bag could not be written to the end (disk full, ...).
 EXIT_RECORDING_FAILED = 3
+#: Exit code of a recorder to which messages of the graph never arrived (the bag lacks them).
+EXIT_MESSAGES_LOST = 4
 
 
 class MetricsNode(Node):
@@ -268,6 +270,7 @@ class MetricsNode(Node):
             if self.failure is None:
                 self.loop.drain()
                 self._write_controller(self.controller_times.flush())
+            self.lost_in_transit = self.guard.missing()
         finally:
             try:
                 self.writer.close()
@@ -288,6 +291,14 @@ class MetricsNode(Node):
         if self.failure is not None:
             self.report_failure()
             return
+        if self.lost_in_transit:
+            self.log.error(
+                f"{sum(self.lost_in_transit.values())} messages of the graph never reached "
+                "the recorder (" + ", ".join(f"{t} {n}" for t, n in
+                                             sorted(self.lost_in_transit.items()))
+                + "): the bag lacks them. Its queues overflowed: a recorder starved of CPU "
+                "(on a busy machine, or beside a lockstep control path under SCHED_FIFO) "
+                "falls behind a graph that runs faster than real time")
         late = self.writer.late_messages
         self.log.info(
             f"bag closed: {self.bag_path} ({sum(self.counts.values())} messages, "
@@ -296,6 +307,9 @@ class MetricsNode(Node):
             + f"; inputs: {self.guard.summary()}")
 
     closed = False
+    #: topic -> messages that never reached this node (known once closed; empty with
+    #: authentication off, which has no sequence numbers to tell)
+    lost_in_transit: dict[str, int] = {}
 
     def parameter_changes(self) -> list[dict[str, Any]]:
         """The live changes of model parameters recorded, each from its owner (the node that
@@ -310,6 +324,7 @@ class MetricsNode(Node):
         return {"state": "failed" if self.failure else "closed",
                 "failure": str(self.failure) if self.failure else "",
                 "late_messages": self.writer.late_messages,
+                "lost_in_transit": self.lost_in_transit,
                 "lost_messages": self.writer.lost_messages + self.dropped,
                 "unmatched_controller_messages": self.controller_times.unmatched}
 
@@ -330,9 +345,12 @@ class MetricsNode(Node):
 
 
 def _finish(node: MetricsNode, code: int) -> int:
-    """Close the bag and write indices.json; a recording that failed exits 3."""
+    """Close the bag and write indices.json; a recording that failed exits 3, one that
+    lacks messages that never reached it 4."""
     node.close()
-    return EXIT_RECORDING_FAILED if node.failure is not None else code
+    if node.failure is not None:
+        return EXIT_RECORDING_FAILED
+    return EXIT_MESSAGES_LOST if node.lost_in_transit and code == 0 else code
 
 
 def main(args: list[str] | None = None) -> int:

@@ -167,6 +167,19 @@ class Verifier:
         #: "newer than the newest"; the (process-keyed) hash tells an exact copy (replayed)
         #: from another message that claims the same sequence (unauthenticated).
         self.seen: dict[bytes, dict[int, int]] = {}
+        #: sender -> [first sequence accepted, messages accepted]: with ``last``, the
+        #: messages of a sender that never came (:meth:`missing`)
+        self.span: dict[bytes, list[int]] = {}
+        self._retired_missing = 0  # missing() of senders forgotten (MAX_SENDERS)
+
+    def missing(self) -> int:
+        """Messages that never arrived between the first and the newest accepted of each
+        sender: a writer's sequence numbers have no holes, so these were lost on the way
+        (a reader queue that overflowed, a writer history that dropped them before this
+        reader took them) or are still on the way. Those sent before the first accepted
+        one (a reader that matched late) are not counted."""
+        return self._retired_missing + sum(self.last[s] - first + 1 - n
+                                           for s, (first, n) in self.span.items())
 
     def check(self, data: bytes) -> int:
         """The payload's length in ``data`` (an authentic, new message: bytes
@@ -196,10 +209,16 @@ class Verifier:
         if seen is None:
             if len(self.last) >= MAX_SENDERS:
                 old = next(iter(self.last))
-                del self.last[old]
+                first, accepted = self.span.pop(old)
+                self._retired_missing += self.last.pop(old) - first + 1 - accepted
                 self.seen.pop(old, None)
             seen = self.seen[sender] = {}
             self.last[sender] = 0
+            self.span[sender] = [seq, 0]
+        span = self.span[sender]
+        span[1] += 1
+        if seq < span[0]:  # an older one overtaken by the first: the span starts here
+            span[0] = seq
         seen[seq] = _hash(data)
         if seq > newest:
             self.last[sender] = newest = seq

@@ -128,6 +128,17 @@ class InputGuard:
                                           else Verifier(self.key, topic))
         return v
 
+    def missing(self) -> dict[str, int]:
+        """Per topic, the authentic messages that never arrived between the first and the
+        newest taken of each publisher (``Verifier.missing``: lost on the way); empty with
+        authentication off (no sequence numbers to tell)."""
+        out = {}
+        for topic, v in self._verifiers.items():
+            n = v.missing() if isinstance(v, Verifier) else 0
+            if n:
+                out[topic] = n
+        return out
+
     def payload(self, topic: str, data: bytes) -> bytes | None:
         """The authenticated payload of ``data`` (trailer stripped), or None (dropped)."""
         n = self.payload_size(topic, data)
