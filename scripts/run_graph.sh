@@ -37,7 +37,7 @@
 #                            layout: docs/foxglove/hexapod_layout.json
 #   -h, --help               the options
 # Exit codes: 0 ok; 2 bad settings (one line naming the option or key, nothing started);
-#   3 a node died or exited non-zero; 4 the recorder failed (or the bag lacks messages);
+#   3 a node died or exited non-zero; 4 the recorder failed (or the bag lacks states);
 #   5 the disk filled up;
 #   6 the model diverged; 7 a damping fallback happened (controller in charge silent);
 #   130 Ctrl-C/SIGTERM before the end of a run with a duration (with --duration 0,

@@ -241,10 +241,11 @@ def test_killed_recorder_exits_4_and_stops_the_graph(script):
 
 def test_the_launcher_says_what_the_bag_lacks_of_the_sims_ticks(tmp_path):
     """The report compares the bag's per-tick messages (the recorder's counts in
-    indices.json) with the sim's last tick, and names what the recorder counted as lost on
-    the way (holes in the senders' sequences, msg_auth.Verifier.missing); a complete bag
-    says nothing. (A lockstep run with the control path under SCHED_FIFO lost ~20000 of
-    120000 messages to a starved recorder this way, unnoticed before.)"""
+    indices.json) with the sim's ticks (the last tick's may be missing after an interrupted
+    run), and says what the recorder counted as lost on the way (holes in the senders'
+    sequences, msg_auth.Verifier.missing); a complete bag says nothing. (A lockstep run with
+    the control path under SCHED_FIFO lost ~20000 of 120000 messages to a starved recorder
+    this way, unnoticed before.)"""
     from hexapod_bringup.graph_launcher import bag_shortfall
 
     indices = tmp_path / "indices.json"
@@ -255,18 +256,22 @@ def test_the_launcher_says_what_the_bag_lacks_of_the_sims_ticks(tmp_path):
                                        "recording": {"lost_in_transit": lost or {}}}))
         return indices
 
-    assert bag_shortfall({"tick": 4000}, doc((4001, 4001, 4001))) == ""
-    assert bag_shortfall({"tick": 4000}, doc((4001, 2000, 4001), {
-        "/hexapod/foot_forces": 2001})) == (
-        "/hexapod/foot_forces 2000 of 4001; lost on the way (holes in the publishers' "
-        "sequences): /hexapod/foot_forces 2001")
-    assert bag_shortfall({"tick": 4000}, doc((3000, 3000, 3000))) == (
+    done = {"tick": 4000, "started": True, "finished": True}
+    assert bag_shortfall(done, doc((4001, 4001, 4001))) == ("", "")
+    assert bag_shortfall(done, doc((4001, 2000, 4001), {"/hexapod/foot_forces": 2001})) == (
+        "/hexapod/foot_forces 2000 of 4001", "/hexapod/foot_forces 2001")
+    assert bag_shortfall(done, doc((3000, 3000, 3000)))[0] == (  # the tail never came
         "/hexapod/joint_states 3000 of 4001, /hexapod/foot_forces 3000 of 4001, "
-        "/hexapod/hip_states 3000 of 4001")  # the tail never came: no hole to count
-    assert bag_shortfall({"tick": 4000}, doc((4001, 4001, 4001), {
-        "/hexapod/reference": 7})).endswith("/hexapod/reference 7")
-    assert bag_shortfall(None, indices) == ""
-    assert bag_shortfall({"tick": 4000}, tmp_path / "missing.json") == ""
+        "/hexapod/hip_states 3000 of 4001")
+    interrupted = {**done, "finished": False}
+    assert bag_shortfall(interrupted, doc((4000, 4000, 4000))) == ("", "")
+    assert bag_shortfall(interrupted, doc((3999, 4000, 4000)))[0] == (
+        "/hexapod/joint_states 3999 of 4000")
+    assert bag_shortfall(done, doc((4001, 4001, 4001), {"/hexapod/reference": 7})) == (
+        "", "/hexapod/reference 7")
+    assert bag_shortfall(None, doc((1, 1, 1))) == ("", "")
+    assert bag_shortfall({**done, "started": False}, doc((0, 0, 0))) == ("", "")
+    assert bag_shortfall(done, tmp_path / "missing.json") == ("", "")
 
 
 def test_ctrl_c_before_the_end_of_a_timed_run_exits_130(script):

@@ -75,8 +75,6 @@ DISK_FULL_BYTES = 1 << 20
 #: Exit code of a recorder whose bag could not be written to the end (disk full, quota, I/O
 #: error): metrics_node.EXIT_RECORDING_FAILED; its log line says which.
 RECORDER_WRITE_FAILED_EXIT = 3
-#: Exit code of a recorder to which messages never arrived: metrics_node.EXIT_MESSAGES_LOST.
-RECORDER_LOST_EXIT = 4
 
 
 class LaunchError(HexapodError):
@@ -421,10 +419,8 @@ class Launcher:
                 self.outcome.add("disk full", f"the recorder ran out of disk space ({how}; "
                                  f"log: {log})")
             elif during_run or code != 0:
-                what = {RECORDER_WRITE_FAILED_EXIT: " (its bag could not be written to the "
-                                                    "end)",
-                        RECORDER_LOST_EXIT: " (messages never reached it: the bag lacks "
-                                            "them, its log says which)"}.get(code, "")
+                what = (" (its bag could not be written to the end)"
+                        if code == RECORDER_WRITE_FAILED_EXIT else "")
                 self.outcome.add("recorder failed", f"the recorder (metrics) {how}{what} "
                                  f"{'during the run' if during_run else 'at the end'} "
                                  f"(log: {log})")
@@ -504,11 +500,14 @@ class Launcher:
             if summary["missed"] or summary["fallback_episodes"]:
                 lines += self.controller_waits()
         lines += inputs_lines(summary, self.bag / "indices.json")
-        short = bag_shortfall(summary, self.bag / "indices.json")
+        short, lost = bag_shortfall(summary, self.bag / "indices.json")
         if short:
-            self.outcome.add("recorder failed", "the bag lacks messages that never reached "
-                             f"the recorder: {short} (log: {self.logs / 'metrics.log'})")
+            self.outcome.add("recorder failed", "the bag lacks states of the sim's ticks: "
+                             f"{short} (log: {self.logs / 'metrics.log'})")
             lines.append(f"  bag: INCOMPLETE: {short}")
+        if lost:
+            lines.append(f"  bag: lost on the way to the recorder (holes in the publishers' "
+                         f"sequence numbers): {lost}")
         lines += indices_lines(self.bag / "indices.json")
         return lines
 
@@ -571,29 +570,28 @@ def inputs_lines(summary: dict[str, Any] | None, indices: Path) -> list[str]:
 PER_TICK_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES)
 
 
-def bag_shortfall(summary: dict[str, Any] | None, indices: Path) -> str:
-    """What the bag lacks of the sim's per-tick messages (its summary's last tick against
-    the recorder's counts in ``indices.json``, the recorder waited for before tick 0), with
-    what the recorder counted as lost on the way (holes in the senders' sequences); empty if
-    nothing, or if either file is missing (reported elsewhere)."""
-    if summary is None:
-        return ""
+def bag_shortfall(summary: dict[str, Any] | None, indices: Path) -> tuple[str, str]:
+    """(what the bag lacks of the sim's per-tick messages, what the recorder counted as lost
+    on the way), each empty if nothing (or if either file is missing: reported elsewhere).
+
+    The first compares the recorder's counts (``indices.json``; it was waited for before
+    tick 0) with the sim's ticks: ``tick`` + 1 of each after a finished run, ``tick`` after
+    an interrupted one (its last tick's messages may not be out). The second is the holes
+    in the senders' sequence numbers (``msg_auth.Verifier.missing``): said, not a failure,
+    since any holder of the run's key can make them."""
     try:
         doc = json.loads(indices.read_text())
     except (OSError, ValueError):
-        return ""
-    expected = int(summary["tick"]) + 1
-    held = doc.get("messages") or {}
-    short = [f"{t} {held.get(t, 0)} of {expected}" for t in PER_TICK_TOPICS
-             if held.get(t, 0) < expected]
+        return "", ""
     lost = (doc.get("recording") or {}).get("lost_in_transit") or {}
-    if not short and not lost:
-        return ""
-    text = ", ".join(short) if short else "every tick's states"
-    if lost:
-        text += ("; lost on the way (holes in the publishers' sequences): "
-                 + ", ".join(f"{t} {n}" for t, n in sorted(lost.items())))
-    return text
+    lost_text = ", ".join(f"{t} {n}" for t, n in sorted(lost.items()))
+    if summary is None or not summary.get("started", True):
+        return "", lost_text
+    expected = int(summary["tick"]) + (1 if summary.get("finished", True) else 0)
+    held = doc.get("messages") or {}
+    short = ", ".join(f"{t} {held.get(t, 0)} of {expected}" for t in PER_TICK_TOPICS
+                      if held.get(t, 0) < expected)
+    return short, lost_text
 
 
 def _changes_in(changes: list[dict[str, Any]], t0: float, t1: float) -> list[dict[str, Any]]:
