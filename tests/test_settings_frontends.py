@@ -287,3 +287,15 @@ def test_one_default_scenario_in_every_front_end():
     assert "force loop in the drive" in convergence_note(rt)
     own, _ = settings(parse(["--mode", "realtime", "--control-rate", "2000"]))
     assert own.sim.control_period == 5e-4 and own.pd_pf.force_loop == "topic"
+
+
+def test_runs_started_in_the_same_second_get_bags_of_their_own(tmp_path):
+    from hexapod_bringup.graph_launcher import fresh_bag_path
+
+    first = fresh_bag_path(tmp_path / "bags", "20261205-120000")
+    second = fresh_bag_path(tmp_path / "bags", "20261205-120000")
+    (tmp_path / "bags" / "20261205-120000-3").mkdir()  # a bag there already (no logs)
+    third = fresh_bag_path(tmp_path / "bags", "20261205-120000")
+    assert [p.name for p in (first, second, third)] == [
+        "20261205-120000", "20261205-120000-2", "20261205-120000-4"]
+    assert all(Path(f"{p}_logs").is_dir() for p in (first, second, third))

@@ -89,7 +89,11 @@ def sim_summary(log: str) -> dict[str, float]:
                   r"(\d+) switches \((\d+) missed within", log)
     assert m, f"no summary line in the sim's log:\n{log[-2000:]}"
     keys = ("tick", "missed", "late", "on_time", "switches", "missed_after_switch")
-    return dict(zip(keys, (int(x) for x in m.groups())))
+    out: dict[str, float] = dict(zip(keys, (int(x) for x in m.groups())))
+    held = re.search(r"(\d+) holds for the recorder \(([\d.]+) s\)", log[m.start():])
+    assert held, log[m.start():]
+    out["recorder_holds"], out["recorder_held_s"] = int(held[1]), float(held[2])
+    return out
 
 
 #: The nodes of a recorded single-controller run (what the sim waits for before tick 0).

@@ -49,12 +49,13 @@ from hexapod_common.core.param_log import RECORD_NAME, ParamRecord
 TYPES = {T.JOINT_STATES: JointState, T.FOOT_FORCES: JointState, T.HIP_STATES: JointState,
          T.REFERENCE: JointState, T.JOINT_COMMANDS: JointState, T.ACTIVE_CONTROLLER: String,
          T.STATUS: DiagnosticArray, T.MARKERS: MarkerArray, T.CLOCK: Clock,
-         T.PARAMETERS: DiagnosticArray}
+         T.PARAMETERS: DiagnosticArray, T.RECORDED: DiagnosticArray}
+QOS = {**C.TOPIC_QOS, T.RECORDED: C.RECORDED_QOS}
 NS = 1_000_000_000
 
 
 def _qos(topic: str) -> Any:
-    return C.TOPIC_QOS[topic].subscriber(50)
+    return QOS[topic].subscriber(50)
 
 
 class Hostile:
@@ -66,12 +67,12 @@ class Hostile:
         self.rng = random.Random(seed)
         self.sent: Counter[str] = Counter()
         self.refused: Counter[str] = Counter()
-        self.pubs = {t: self.node.create_publisher(m, t, C.TOPIC_QOS[t].publisher())
+        self.pubs = {t: self.node.create_publisher(m, t, QOS[t].publisher())
                      for t, m in TYPES.items()}
         # Fast DDS never delivers an empty sample, and a reliable reader then holds back
         # every later sample of that writer (in-order delivery): empty ones get writers
         # of their own, so that they stall nothing but themselves.
-        self.empty_pubs = {t: self.node.create_publisher(m, t, C.TOPIC_QOS[t].publisher())
+        self.empty_pubs = {t: self.node.create_publisher(m, t, QOS[t].publisher())
                            for t, m in TYPES.items()}
         key = run_key() if sign else None
         self.signers = {t: Signer(key, t) for t in TYPES} if key is not None else {}

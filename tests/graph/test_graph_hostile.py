@@ -16,6 +16,7 @@ torque is one of those commands (or the torque held).
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -192,7 +193,8 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
     # The fuzzer reached every topic, signed and not, with every kind of bad message.
     topics = {k.split(" ")[0] for k in sent}
     assert topics >= {T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE,
-                      T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS, T.MARKERS}
+                      T.JOINT_COMMANDS, T.ACTIVE_CONTROLLER, T.STATUS, T.MARKERS,
+                      T.RECORDED}
     assert sum(n for k, n in sent.items() if k.endswith("(signed)")) > 50
     for kind in ("random", "empty", "truncated", "wrong names", "short array", "NaN",
                  "stamp 1e6 s", "negative stamp", "unknown controller", "negative drive gain"):
@@ -213,6 +215,9 @@ def test_fuzz_on_every_subscribed_topic_is_dropped_counted_and_changes_nothing(
         assert dropped.get(f"{topic} ({cause})", 0) > 0, (topic, cause, dropped)
     sim_line = [line for line in logs["hexapod_sim"].splitlines() if "stopped at tick" in line]
     assert f"{T.JOINT_COMMANDS} " in sim_line[0].split("inputs: dropped")[1]
+    if mode == "lockstep":  # the recorder's progress: the sim reads it in lockstep only
+        for cause in ("unauthenticated", "undecodable"):
+            assert re.search(rf"{T.RECORDED} \d+ {cause}", sim_line[0]), (cause, sim_line)
     values = _status_values(rec, "hexapod_sim")
     assert int(values["dropped"]) > 0 and values["authentication"] == "on"
     assert any(k.startswith(f"dropped {T.JOINT_COMMANDS} (") for k in values)

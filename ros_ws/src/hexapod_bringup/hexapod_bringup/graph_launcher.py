@@ -24,6 +24,7 @@ commanded by the controller in charge: a cycle with such ticks is labelled ``mix
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -275,6 +276,23 @@ def write_params_file(path: Path, p: HexapodParams, node_params: dict[str, Any])
 # --------------------------------------------------------------------------- the run
 
 
+def fresh_bag_path(parent: Path, stamp: str) -> Path:
+    """``parent/stamp``, else ``stamp-2``, ``stamp-3``, ...: the first whose log directory
+    (``<bag>_logs``) this call creates, so that two runs started in the same second never
+    share a bag (the second one's recorder then refused the path and the run failed)."""
+    parent.mkdir(parents=True, exist_ok=True)
+    for i in itertools.count(1):
+        bag = (parent / (stamp if i == 1 else f"{stamp}-{i}")).resolve()
+        if bag.exists():
+            continue
+        try:
+            Path(f"{bag}_logs").mkdir()
+        except FileExistsError:
+            continue
+        return bag
+    raise AssertionError("unreachable")
+
+
 class Launcher:
     """One run of the graph from validated settings."""
 
@@ -283,10 +301,12 @@ class Launcher:
         self.args = args
         self.p = p
         root = Path.cwd()
-        bag = Path(args.bag) if args.bag else root / "bags" / time.strftime("%Y%m%d-%H%M%S")
-        self.bag = bag.resolve()
-        if self.bag.exists():
-            raise LaunchError(f"bag directory {self.bag} already exists")
+        if args.bag:
+            self.bag = Path(args.bag).resolve()
+            if self.bag.exists():
+                raise LaunchError(f"bag directory {self.bag} already exists")
+        else:
+            self.bag = fresh_bag_path(root / "bags", time.strftime("%Y%m%d-%H%M%S"))
         self.logs = Path(f"{self.bag}_logs")
         self.run_dir = Path(tempfile.mkdtemp(prefix="hexapod_run_"))  # 0700
         self.params_file = self.run_dir / "params.yaml"
@@ -346,10 +366,6 @@ class Launcher:
                   f"({HOW_TO_PERMIT}): the control path runs with normal scheduling and "
                   f"realtime mode may miss deadlines", file=sys.stderr, flush=True)
             return 0
-        if self.p.sim.mode == "lockstep":
-            print("run_graph: warning: a lockstep graph under SCHED_FIFO runs faster than "
-                  "real time at the recorder's expense: starved of CPU, it can lose messages "
-                  "(then said at the end, exit 4)", file=sys.stderr, flush=True)
         print(f"run_graph: SCHED_FIFO priority {priority} for the control path "
               f"({', '.join(RT_NODES)}: main and Fast DDS threads) and the other nodes' Fast "
               f"DDS threads", flush=True)

@@ -114,6 +114,11 @@ class MetricsNode(Node):
         self.pub_status = self.create_publisher(DiagnosticArray, T.STATUS,
                                                 C.TOPIC_QOS[T.STATUS].publisher())
         self.indices_signer = self.guard.signer(T.INDICES)
+        # How far the bag goes, for the sim's lockstep pacing (hexapod_sim/core/recorder_pace.py)
+        self.pub_recorded = self.create_publisher(DiagnosticArray, T.RECORDED,
+                                                  C.RECORDED_QOS.publisher())
+        self.recorded_signer = self.guard.signer(T.RECORDED)
+        self.next_recorded = 0  # the tick of the next /hexapod/recorded
         # /clock is not subscribed: it carries no tag (a bounded type, see sim_node.py);
         # the clock of each tick is written from the authenticated joint states.
         for topic in TOPICS:
@@ -136,6 +141,14 @@ class MetricsNode(Node):
             self.loop.stop()
             return
         self.counts[topic] += 1
+
+    def _say_recorded(self, stamp: int, period_ns: int) -> None:
+        """Publish how far the bag goes (the newest joint state written)."""
+        if self.failure is not None:
+            return
+        self.pub_recorded.publish(self.recorded_signer.sign(
+            cdr.encode_diagnostic_array(stamp, [])))
+        self.next_recorded = C.tick_of(stamp, period_ns) + T.RECORDED_EVERY
 
     def _write_controller(self, items: list[tuple[int, bytes]]) -> None:
         for log_time, data in items:
@@ -164,6 +177,8 @@ class MetricsNode(Node):
                 if topic == T.JOINT_STATES:
                     self._write_controller(self.controller_times.on_state(
                         stamp, in_charge(view.frame_id)))
+                    if C.tick_of(stamp, period_ns) >= self.next_recorded:
+                        self._say_recorded(stamp, period_ns)
                 if topic in CYCLE_TOPICS:
                     tick = C.tick_of(stamp, period_ns)
                     if topic == T.JOINT_STATES:

@@ -24,6 +24,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -33,11 +34,14 @@ from hexapod_common.core import msg_checks as M
 from hexapod_common.core import topics as T
 from .core.actuator import saturate
 from .core.physics import Physics
+from .core.recorder_pace import RecorderPace
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.controller_names import check_name, engine_names, node_of
 from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
 from hexapod_common.core.switch_channel import ChannelError, SwitchServer
+from hexapod_common.core import cdr
 from hexapod_common.core import trace as _trace
+from hexapod_common.core.errors import CdrError
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
 from .core.uneven_ground import GroundDraws, pairs_for
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
@@ -73,6 +77,9 @@ INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (in
 #: for its command writer to match the recorder's reader. 0.5 s lost the first ~30 of 2000
 #: commands to the recorder on a loaded two-worker CI run, twice in two stops.
 JOINED_MATCH_WAIT = 1.5
+#: Wall s the sim waits for a silent recorder that is RECORDER_LAG ticks behind before it
+#: goes on without it (core/recorder_pace.py): longer than any stall of a live recorder.
+RECORDER_PATIENCE = 5.0
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
@@ -167,6 +174,11 @@ class SimNode(Node):
             # Volatile: matches every writer, transient-local or volatile (a node publishing
             # with rclpy's defaults is heard; docs/controllers.md, "QoS").
             C.TOPIC_QOS[T.JOINT_COMMANDS].volatile_subscriber(C.HISTORY_DEPTH))
+        # Lockstep: a tick waits while the recorder is too far behind (core/recorder_pace.py).
+        self.pace = RecorderPace(T.RECORDER_LAG, RECORDER_PATIENCE)
+        if self.mode == "lockstep":
+            self.loop.subscribe(DiagnosticArray, T.RECORDED, self._on_recorded,
+                                C.RECORDED_QOS.subscriber(C.RECORDED_QOS.depth))
         # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
         self.channel: SwitchServer | None = None
         try:
@@ -490,8 +502,20 @@ class SimNode(Node):
         self.prepared = (k, stamp, out)
 
     def _send(self) -> None:
-        """Publish the prepared tick and arm the deadline of its command."""
-        _, _, out = self.prepared
+        """Publish the prepared tick and arm the deadline of its command (lockstep: unless
+        the recorder is too far behind; then when it has caught up)."""
+        k, _, out = self.prepared
+        if self.pace.recorded is not None:
+            gave_up = self.pace.gave_up
+            until = self.pace.hold_until(k, time.monotonic())
+            if until is not None:
+                self.loop.set_deadline(until, self._send)
+                return
+            if self.pace.gave_up > gave_up:
+                self.log.warning(
+                    f"the recorder has said nothing for {RECORDER_PATIENCE:g} s and is more "
+                    f"than {T.RECORDER_LAG} ticks behind tick {k}: going on without waiting "
+                    f"for it (its bag may lack ticks: run_graph says so)")
         self.ticks.sending(time.monotonic())  # the round trip counts from here
         tr = _trace.TRACER
         if tr is not None:
@@ -531,6 +555,22 @@ class SimNode(Node):
                 self._send()
         elif got is Outcome.SCHEDULE:  # realtime: tick 1 goes out now
             self.loop.set_deadline(0.0, self._on_period_end)
+
+    def _on_recorded(self, data: bytes) -> None:
+        """The recorder's progress: a held tick goes out once it is close enough."""
+        payload = self.guard.payload(T.RECORDED, data)
+        if payload is None:  # dropped (and counted) by the guard
+            return
+        try:
+            stamp, _ = cdr.decode_diagnostic_array(payload)
+        except CdrError as err:
+            self.guard.drop(T.RECORDED, M.UNDECODABLE, str(err))
+            return
+        # never past the current tick (a key holder's stamp far ahead must not end the pacing)
+        self.pace.heard(min(C.tick_of(stamp, self.period_ns), self.ticks.tick),
+                        time.monotonic())
+        if self.pace.holding:
+            self._send()
 
     def _on_timeout(self) -> None:
         """Lockstep: no command for the current tick in time."""
@@ -759,7 +799,8 @@ class SimNode(Node):
                 f"{m.missed} missed, {m.late} late, {m.on_time} on time (realtime), "
                 f"{m.fallback_episodes} fallback episodes, {m.switches} switches "
                 f"({m.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
-                f"{m.resyncs} resyncs; round trip median {m.latency_ms(0.5):.2f} ms, p99 "
+                f"{m.resyncs} resyncs, {self.pace.holds} holds for the recorder "
+                f"({self.pace.held_s:.2f} s); round trip median {m.latency_ms(0.5):.2f} ms, p99 "
                 f"{m.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}; "
                 f"{m.foreign} commands from a controller not in charge; inputs: "
                 f"{self.guard.summary()}")
@@ -772,7 +813,7 @@ class SimNode(Node):
         import json
 
         g = self.guard
-        doc = self.ticks.summary_doc() | {
+        doc = self.ticks.summary_doc() | self.pace.as_dict() | {
             "dropped": {f"{t} ({c})": n for (t, c), n in g.drops.counts.items()},
             "outside_publishers": {t: sorted(n) for t, n in g.outsiders.items()}}
         record = self.ticks.physics.ground_record()

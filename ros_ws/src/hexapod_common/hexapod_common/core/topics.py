@@ -31,6 +31,9 @@ CLOCK = "/clock"
 MARKERS = "/hexapod/markers"
 #: Parameter records (core/param_log.py): each node's start values and changes, transient-local.
 PARAMETERS = "/hexapod/parameters"
+#: The recorder's progress (lockstep pacing, hexapod_sim/core/recorder_pace.py): the stamp
+#: of the newest joint state it wrote, every RECORDED_EVERY ticks. Not recorded itself.
+RECORDED = "/hexapod/recorded"
 
 #: Depth of the publishers' histories of the per-tick topics: how far (in ticks) a slow
 #: reliable reader (the recorder) may lag before the writer drops samples for it.
@@ -44,6 +47,11 @@ RECORD_DEPTH = 10000
 #: realtime mode on a loaded machine sometimes found the switch tick's state or inputs
 #: rolled out of its queues and never answered it.
 CONTROL_DEPTH = 200
+#: Lockstep: ticks the recorder may be behind the sim before the sim holds the next tick
+#: (well inside HISTORY_DEPTH: nothing is lost to the bag), and how often (ticks written)
+#: the recorder says how far it is.
+RECORDER_LAG = 1000
+RECORDED_EVERY = 100
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
@@ -82,6 +90,8 @@ TOPICS: dict[str, TopicSpec] = {
     MARKERS: TopicSpec("visualization_msgs/msg/MarkerArray", depth=100),
     PARAMETERS: TopicSpec(DIAGNOSTIC_ARRAY, transient=True, depth=1000),
 }
+#: /hexapod/recorded: a header stamp, no status (signed like every topic of the graph).
+RECORDED_SPEC = TopicSpec(DIAGNOSTIC_ARRAY, depth=10)
 #: The topics published at every control tick: the recorder cuts its chunks at the same
 #: tick of all of them (so a killed recorder truncates them all at one tick).
 TICK_TOPICS = (CLOCK, JOINT_STATES, FOOT_FORCES, HIP_STATES, REFERENCE, JOINT_COMMANDS)

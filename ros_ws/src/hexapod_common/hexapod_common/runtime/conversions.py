@@ -101,6 +101,8 @@ class TopicQos:
 
 #: The topic table with rclpy's QoS profiles and message classes.
 TOPIC_QOS: dict[str, TopicQos] = {t: TopicQos(spec) for t, spec in T.TOPICS.items()}
+#: /hexapod/recorded (the recorder's progress; not in the recorded table).
+RECORDED_QOS = TopicQos(T.RECORDED_SPEC)
 
 # --------------------------------------------------------------------------- stamps
 

@@ -41,6 +41,7 @@ PUBLISHERS: dict[str, tuple[str, ...]] = {
     T.ACTIVE_CONTROLLER: ("hexapod_sim",), T.REFERENCE: ("trajectory_generator",),
     T.JOINT_COMMANDS: CONTROLLER_NODES, T.INDICES: ("metrics",), T.MARKERS: ("markers",),
     T.STATUS: GRAPH_NODES, T.PARAMETERS: (*GRAPH_NODES, "foxglove_bridge"),
+    T.RECORDED: ("metrics",),
 }
 #: Topics whose messages the graph's nodes sign (/clock is a bounded type: no room for a tag).
 SIGNED_TOPICS = frozenset(PUBLISHERS) - {T.CLOCK}

@@ -1,0 +1,74 @@
+"""Lockstep: the sim does not run away from its recorder.
+
+In lockstep the graph runs as fast as its control loop; the recorder is not on that loop
+and takes its queues when it gets the CPU (it runs at a lower priority). Its queues, and
+the publishers' histories behind them (``topics.HISTORY_DEPTH`` ticks), absorb a lag;
+beyond that the oldest messages are lost to the bag. So the recorder says how far it has
+written (``/hexapod/recorded``: the stamp of its newest joint state, every
+``topics.RECORDED_EVERY`` ticks) and the sim holds a tick while the recorder is more than
+``topics.RECORDER_LAG`` ticks behind it. A recorder silent for ``patience`` wall s (stopped,
+stuck) is not waited for any longer, until it speaks again. Realtime runs keep their clock
+and never hold.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class RecorderPace:
+    """When the next tick may go out, given the recorder's progress (wall s: monotonic)."""
+
+    #: Ticks the recorder may be behind the tick about to be sent.
+    lag: int
+    #: Wall s of silence from the recorder after which the sim goes on without it.
+    patience: float
+    #: The newest tick the recorder said it wrote (None: not heard, or given up on).
+    recorded: int | None = None
+    #: When the recorder was last heard.
+    heard_at: float = 0.0
+    #: Holds so far, their total wall s, and how often the sim gave up waiting.
+    holds: int = 0
+    held_s: float = 0.0
+    gave_up: int = 0
+    _since: float | None = None
+
+    def heard(self, tick: int, now: float) -> None:
+        """The recorder wrote tick ``tick`` (its newest joint state)."""
+        self.recorded = tick if self.recorded is None else max(self.recorded, tick)
+        self.heard_at = now
+
+    def hold_until(self, tick: int, now: float) -> float | None:
+        """None: ``tick`` may go out now. Else it is held: look again when the recorder is
+        heard or at the returned time (when the sim gives up waiting)."""
+        if self.recorded is None or tick - self.recorded <= self.lag:
+            self._release(now)
+            return None
+        give_up_at = self.heard_at + self.patience
+        if now >= give_up_at:
+            self.gave_up += 1
+            self.recorded = None  # until the recorder speaks again
+            self._release(now)
+            return None
+        if self._since is None:
+            self._since = now
+            self.holds += 1
+        return give_up_at
+
+    @property
+    def holding(self) -> bool:
+        """Whether a tick is held now."""
+        return self._since is not None
+
+    def _release(self, now: float) -> None:
+        if self._since is not None:
+            self.held_s += now - self._since
+            self._since = None
+
+    def as_dict(self) -> dict[str, float | int]:
+        """The summary's figures."""
+        return {"recorder_holds": self.holds, "recorder_held_s": round(self.held_s, 3),
+                "recorder_given_up": self.gave_up}
+
+
+__all__ = ["RecorderPace"]
