@@ -37,6 +37,17 @@ def test_a_silent_recorder_is_given_up_on_until_it_speaks_again():
     assert p.holds == 2
 
 
+def test_a_recorder_that_left_the_graph_is_not_waited_for():
+    p = RecorderPace(lag=100, patience=5.0)
+    p.heard(0, 0.0)
+    assert p.hold_until(500, 1.0) is not None
+    p.forget(1.5)
+    assert not p.holding and p.held_s == pytest.approx(0.5) and p.gave_up == 0
+    assert p.hold_until(500, 1.5) is None
+    p.heard(450, 2.0)  # a recorder (re)joined
+    assert p.hold_until(500, 2.0) is None and p.hold_until(600, 2.0) is not None
+
+
 def test_the_lag_stays_inside_what_the_publishers_keep_for_the_recorder():
     # a held tick's recorder is at most RECORDER_LAG + one report behind: the writers'
     # histories (HISTORY_DEPTH ticks) still hold every message it has not taken

@@ -52,6 +52,7 @@ def test_recorder_stopped_or_killed_leaves_a_readable_bag(make_graph, tmp_path):
                "three gait cycles scored by the second recorder")
     size = _mcap_size(kill_bag)  # the cycle's states are written; wait for their chunk:
     g.wait_for(lambda: _mcap_size(kill_bag) > size + 1_500_000, 120, "the next chunks")
+    before = g.log("hexapod_sim").count("a recorder left the graph")
     assert g.kill("metrics", signal.SIGKILL) == -signal.SIGKILL
     assert part in g.log("metrics") and "bag closed" not in g.log("metrics").split(part)[-1]
     with open_bag(kill_bag) as bag:
@@ -59,3 +60,9 @@ def test_recorder_stopped_or_killed_leaves_a_readable_bag(make_graph, tmp_path):
         js = read_joint_state_arrays(bag, T.JOINT_STATES)
     assert len(js.stamps) > 1000 and _contiguous(js.stamps)
     assert g.procs["hexapod_sim"].poll() is None  # the graph went on without its recorder
+    # ... and lockstep stopped waiting for it once its peers dropped it (its lease), not
+    # after the sim's patience with a silent recorder
+    left = "a recorder left the graph"
+    g.wait_for(lambda: g.log("hexapod_sim").count(left) >= before + 1, 60,
+               "the sim to see the killed recorder leave")
+    assert "going on without waiting" not in g.log("hexapod_sim")

@@ -80,6 +80,9 @@ JOINED_MATCH_WAIT = 1.5
 #: Wall s the sim waits for a silent recorder that is RECORDER_LAG ticks behind before it
 #: goes on without it (core/recorder_pace.py): longer than any stall of a live recorder.
 RECORDER_PATIENCE = 5.0
+#: Wall s between two looks, while a tick is held, at the writers of /hexapod/recorded: when a
+#: recorder left the graph (closed, or dropped as dead) or joined it, the hold ends.
+RECORDER_LOOK = 0.25
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
 
 
@@ -176,9 +179,12 @@ class SimNode(Node):
             C.TOPIC_QOS[T.JOINT_COMMANDS].volatile_subscriber(C.HISTORY_DEPTH))
         # Lockstep: a tick waits while the recorder is too far behind (core/recorder_pace.py).
         self.pace = RecorderPace(T.RECORDER_LAG, RECORDER_PATIENCE)
+        self.recorded_sub = None
+        self.recorders = 0  # writers of /hexapod/recorded when a recorder last spoke
         if self.mode == "lockstep":
-            self.loop.subscribe(DiagnosticArray, T.RECORDED, self._on_recorded,
-                                C.RECORDED_QOS.subscriber(C.RECORDED_QOS.depth))
+            self.recorded_sub = self.loop.subscribe(
+                DiagnosticArray, T.RECORDED, self._on_recorded,
+                C.RECORDED_QOS.subscriber(C.RECORDED_QOS.depth))
         # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
         self.channel: SwitchServer | None = None
         try:
@@ -507,9 +513,21 @@ class SimNode(Node):
         k, _, out = self.prepared
         if self.pace.recorded is not None:
             gave_up = self.pace.gave_up
-            until = self.pace.hold_until(k, time.monotonic())
+            now = time.monotonic()
+            until = self.pace.hold_until(k, now)
+            n = self.recorded_sub.get_publisher_count() if until is not None else 0
+            if until is not None and n != self.recorders:
+                # One left (closed, or dropped by its peers when its lease ran out), or one
+                # joined (it records nothing while this tick is held, so says nothing): wait
+                # for nobody until the next word of a recorder.
+                self.log.info(f"a recorder {'joined' if n > self.recorders else 'left'} the "
+                              f"graph at tick {k} ({n} now): lockstep waits for the "
+                              f"recorders' next word")
+                self.pace.forget(now)
+                self.recorders = n
+                until = None
             if until is not None:
-                self.loop.set_deadline(until, self._send)
+                self.loop.set_deadline(min(until, now + RECORDER_LOOK), self._send)
                 return
             if self.pace.gave_up > gave_up:
                 self.log.warning(
@@ -569,6 +587,7 @@ class SimNode(Node):
         # never past the current tick (a key holder's stamp far ahead must not end the pacing)
         self.pace.heard(min(C.tick_of(stamp, self.period_ns), self.ticks.tick),
                         time.monotonic())
+        self.recorders = self.recorded_sub.get_publisher_count()  # who a hold waits for
         if self.pace.holding:
             self._send()
 

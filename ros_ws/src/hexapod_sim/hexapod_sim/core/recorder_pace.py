@@ -6,9 +6,11 @@ the publishers' histories behind them (``topics.HISTORY_DEPTH`` ticks), absorb a
 beyond that the oldest messages are lost to the bag. So the recorder says how far it has
 written (``/hexapod/recorded``: the stamp of its newest joint state, every
 ``topics.RECORDED_EVERY`` ticks) and the sim holds a tick while the recorder is more than
-``topics.RECORDER_LAG`` ticks behind it. A recorder silent for ``patience`` wall s (stopped,
-stuck) is not waited for any longer, until it speaks again. Realtime runs keep their clock
-and never hold.
+``topics.RECORDER_LAG`` ticks behind it. When the writers of that progress change during a
+hold (a recorder closed, or dropped by its peers when its lease ran out; or one joined,
+which records nothing while the sim holds), or when the recorder is silent for
+``patience`` wall s (stuck), nobody is waited for until a recorder speaks again. Realtime
+runs keep their clock and never hold.
 """
 from __future__ import annotations
 
@@ -54,6 +56,11 @@ class RecorderPace:
             self._since = now
             self.holds += 1
         return give_up_at
+
+    def forget(self, now: float) -> None:
+        """The recorders on the graph changed: no tick waits until one speaks again."""
+        self.recorded = None
+        self._release(now)
 
     @property
     def holding(self) -> bool:
