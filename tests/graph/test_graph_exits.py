@@ -181,6 +181,7 @@ def test_lockstep_waits_for_a_stopped_recorder_and_its_bag_lacks_nothing(script)
     assert summary["tick"] == 10_000 and summary["missed"] == 0
     assert summary["recorder_holds"] >= 1 and summary["recorder_held_s"] >= 0.1, summary
     assert "going on without waiting" not in s.log("hexapod_sim")
+    assert f"{summary['recorder_holds']} holds for the recorder" in s.stdout()  # the report
     with open_bag(s.bag) as b:
         for topic in (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.JOINT_COMMANDS):
             js = read_joint_state_arrays(b, topic)

@@ -506,7 +506,10 @@ class Launcher:
                 f"  sim: stopped at tick {summary['tick']} (t = "
                 f"{summary['tick'] * summary['control_period']:.3f} s): {summary['missed']} "
                 f"missed, {summary['late']} late, {summary['fallback_episodes']} fallback "
-                f"episodes, {len(summary['switches'])} switches")
+                f"episodes, {len(summary['switches'])} switches"
+                + (f", {summary['recorder_holds']} holds for the recorder "
+                   f"({summary.get('recorder_held_s', 0.0):.2f} s)"
+                   if summary.get("recorder_holds") else ""))
             if summary["fallback_episodes"]:
                 ranges = summary["fallback_ticks"]
                 self.outcome.add("fallback", f"{summary['fallback_episodes']} fallback "
