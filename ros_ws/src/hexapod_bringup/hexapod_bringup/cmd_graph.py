@@ -39,8 +39,9 @@ from typing import IO, Any, Callable, Sequence
 
 from hexapod_common.core.errors import HexapodError
 from hexapod_common.core.controller_names import engine_names, name_of, node_of
-from hexapod_common.runtime.dds_profile import (RESTART_PARTICIPANT_IDS, TOOL_PARTICIPANT_IDS,
-                                                PortFence, domain_id_from_env, shm_locks,
+from hexapod_common.runtime.dds_profile import (LEASE_S, RESTART_PARTICIPANT_IDS,
+                                                TOOL_PARTICIPANT_IDS, PortFence,
+                                                domain_id_from_env, shm_locks,
                                                 private_profile, remove_dead_shm,
                                                 unused_participant_id)
 from hexapod_common.runtime import node_fork
@@ -88,11 +89,14 @@ SIM_TIME_NODES = ("trajectory_generator", "pd_p_controller", "pd_pf_controller",
 #: their Fast DDS threads only).
 RT_NODES = ("hexapod_sim", "pd_p_controller", "pd_pf_controller", "trajectory_generator")
 RT_PRIORITY_NODES = RT_NODES + ("metrics", "markers", "foxglove_bridge")
-#: Wall s a node started in place of one that died by a signal waits after that death. A
-#: recorder forked 30-70 ms after its predecessor's SIGKILL stalled the graph's deliveries
-#: to the others (Fast DDS: 2 of 14 runs of the killed-recorder test; the predecessor still
-#: in the peers' view under the same node name); 1 s later, 0 of 14 (docs/benchmarks.md).
-RESTART_PAUSE = 1.0
+#: Wall s a node started in place of one that died by a signal waits after that death: until
+#: the predecessor's participant lease has run out at its peers. A recorder forked 30-70 ms
+#: after its predecessor's SIGKILL stalled the graph's deliveries to the others (Fast DDS:
+#: 2 of 14 runs of the killed-recorder test; the predecessor still in the peers' view under
+#: the same node name); 1 s later, 0 of 14, but a full suite run later stalled the graph for
+#: 7 s and left PD-P&F silent for the rest of the run with the predecessor still in view
+#: (the sim saw two recorders). After the lease, the peers have dropped the dead one.
+RESTART_PAUSE = LEASE_S + 0.5
 #: Wall s between two looks at a running node's shared-memory locks once they are known
 #: (GraphProcesses.poll; the launcher's watch loop polls every 0.1 s).
 LOCKS_REFRESH = 2.0
