@@ -70,7 +70,7 @@ class Spec(Node):
         for n in ("kp_hip", "kp_knee"):
             self.declare_parameter(n, KP[n[3:]])
         self.seq, self.refs, self.pending = 0, {}, None
-        self.pub = self.create_publisher(JointState, TOPIC, 10)
+        self.pub = self.create_publisher(JointState, TOPIC, 5000)  # as the doc advises
         self.create_subscription(JointState, "/hexapod/reference", self.on_ref, QoSProfile(
             depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))  # as the doc advises
         self.create_subscription(JointState, "/hexapod/joint_states", self.on_state, 100)
@@ -396,7 +396,7 @@ class Managed(LifecycleNode):
 
     def on_configure(self, state):
         self.sign = signer("/hexapod/joint_commands")
-        self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 10)
+        self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 5000)
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state):

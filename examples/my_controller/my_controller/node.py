@@ -31,7 +31,10 @@ class MyController(Node):
         self.refs = {}  # stamp (ns) -> (theta_d, dtheta_d)
         self.waiting = None  # a state whose reference has not come yet
         self.sign = signer("/hexapod/joint_commands")
-        self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 10)
+        # a deep history, as the graph's own writers keep (5000): the recorder may be up to
+        # 1000 ticks behind in lockstep, and a command it has not taken yet when it rolls out
+        # of a 10-deep history is missing from the bag (run_graph says so)
+        self.pub = self.create_publisher(JointState, "/hexapod/joint_commands", 5000)
         # deeper queues than the default 10: references come in bursts up to 50 ticks ahead,
         # and a state must not roll out while the node catches up (answer late, not never);
         # transient-local: the references sent before this reader matched come too
