@@ -142,13 +142,13 @@ class MetricsNode(Node):
             return
         self.counts[topic] += 1
 
-    def _say_recorded(self, stamp: int, period_ns: int) -> None:
-        """Publish how far the bag goes (the newest joint state written)."""
+    def _say_recorded(self, stamp: int, tick: int) -> None:
+        """Publish how far the bag goes (the newest joint state written: ``stamp``, ``tick``)."""
         if self.failure is not None:
             return
         self.pub_recorded.publish(self.recorded_signer.sign(
             cdr.encode_diagnostic_array(stamp, [])))
-        self.next_recorded = C.tick_of(stamp, period_ns) + T.RECORDED_EVERY
+        self.next_recorded = tick + T.RECORDED_EVERY
 
     def _write_controller(self, items: list[tuple[int, bytes]]) -> None:
         for log_time, data in items:
@@ -170,6 +170,7 @@ class MetricsNode(Node):
                     return
                 payload, view = got
                 stamp = view.stamp_ns
+                tick = C.tick_of(stamp, period_ns)
                 if topic == T.JOINT_STATES:
                     self.clock_ns = max(self.clock_ns, stamp)
                     self._write(T.CLOCK, stamp, C.encode_clock(stamp))
@@ -177,10 +178,9 @@ class MetricsNode(Node):
                 if topic == T.JOINT_STATES:
                     self._write_controller(self.controller_times.on_state(
                         stamp, in_charge(view.frame_id)))
-                    if C.tick_of(stamp, period_ns) >= self.next_recorded:
-                        self._say_recorded(stamp, period_ns)
+                    if tick >= self.next_recorded:
+                        self._say_recorded(stamp, tick)
                 if topic in CYCLE_TOPICS:
-                    tick = C.tick_of(stamp, period_ns)
                     if topic == T.JOINT_STATES:
                         self.scorer.add_frame(tick, view.frame_id)
                     self.scorer.add_raw(topic, tick, payload)

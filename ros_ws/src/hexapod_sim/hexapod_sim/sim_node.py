@@ -511,29 +511,8 @@ class SimNode(Node):
         """Publish the prepared tick and arm the deadline of its command (lockstep: unless
         the recorder is too far behind; then when it has caught up)."""
         k, _, out = self.prepared
-        if self.pace.recorded is not None:
-            gave_up = self.pace.gave_up
-            now = time.monotonic()
-            until = self.pace.hold_until(k, now)
-            n = self.recorded_sub.get_publisher_count() if until is not None else 0
-            if until is not None and n != self.recorders:
-                # One left (closed, or dropped by its peers when its lease ran out), or one
-                # joined (it records nothing while this tick is held, so says nothing): wait
-                # for nobody until the next word of a recorder.
-                self.log.info(f"a recorder {'joined' if n > self.recorders else 'left'} the "
-                              f"graph at tick {k} ({n} now): lockstep waits for the "
-                              f"recorders' next word")
-                self.pace.forget(now)
-                self.recorders = n
-                until = None
-            if until is not None:
-                self.loop.set_deadline(min(until, now + RECORDER_LOOK), self._send)
-                return
-            if self.pace.gave_up > gave_up:
-                self.log.warning(
-                    f"the recorder has said nothing for {RECORDER_PATIENCE:g} s and is more "
-                    f"than {T.RECORDER_LAG} ticks behind tick {k}: going on without waiting "
-                    f"for it (its bag may lack ticks: run_graph says so)")
+        if self.pace.recorded is not None and self._held_for_recorder(k):
+            return
         self.ticks.sending(time.monotonic())  # the round trip counts from here
         tr = _trace.TRACER
         if tr is not None:
@@ -573,6 +552,33 @@ class SimNode(Node):
                 self._send()
         elif got is Outcome.SCHEDULE:  # realtime: tick 1 goes out now
             self.loop.set_deadline(0.0, self._on_period_end)
+
+    def _held_for_recorder(self, k: int) -> bool:
+        """Lockstep: whether tick ``k`` waits for the recorder (core/recorder_pace.py); if so
+        :meth:`_send` runs again when it is heard, at the next look or when it is given up."""
+        now = time.monotonic()
+        gave_up = self.pace.gave_up
+        until = self.pace.hold_until(k, now)
+        if until is None:
+            if self.pace.gave_up > gave_up:
+                self.log.warning(
+                    f"the recorder has said nothing for {RECORDER_PATIENCE:g} s and is more "
+                    f"than {T.RECORDER_LAG} ticks behind tick {k}: going on without waiting "
+                    f"for it (its bag may lack ticks: run_graph says so)")
+            return False
+        n = self.recorded_sub.get_publisher_count()
+        if n != self.recorders:
+            # One left (closed, or dropped by its peers when its lease ran out), or one
+            # joined (it records nothing while this tick is held, so says nothing): wait
+            # for nobody until the next word of a recorder.
+            self.log.info(f"a recorder {'joined' if n > self.recorders else 'left'} the "
+                          f"graph at tick {k} ({n} now): lockstep waits for the "
+                          f"recorders' next word")
+            self.pace.forget(now)
+            self.recorders = n
+            return False
+        self.loop.set_deadline(min(until, now + RECORDER_LOOK), self._send)
+        return True
 
     def _on_recorded(self, data: bytes) -> None:
         """The recorder's progress: a held tick goes out once it is close enough."""
