@@ -6,8 +6,8 @@ from hexapod_sim.core.body import LINKS, body_forces
 from hexapod_sim.core.contact import limit_force, spring_damper, update_contact
 from hexapod_sim.core.dynamics import bias_forces, leg_accel, mass_matrix
 from hexapod_sim.core.engine import advance, initial_state, legs
-from hexapod_common.core.layout import (P_G, P_HIPX, P_KBX, P_KBY, P_L1, P_L2, P_MF, P_MH, P_MK,
-                                        model_vector)
+from hexapod_common.core.layout import (MODEL_SIZE, P_BBX, P_BBY, P_G, P_HIPX, P_KBX, P_KBY, P_L1,
+                                        P_L2, P_MF, P_MH, P_MK, Q0, STATE_SIZE, V0, model_vector)
 from hexapod_common.core.params import load_params
 
 
@@ -132,14 +132,35 @@ def test_ground_force_law():
     assert fx == pytest.approx(-0.5 * fy)
 
 
+def _body_state(q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    """A state vector holding leg coordinates q and rates dq (6, 4)."""
+    s = np.zeros(STATE_SIZE)
+    s[Q0:Q0 + 24], s[V0:V0 + 24] = q.ravel(), dq.ravel()
+    return s
+
+
+def _body_model(hip_x0: np.ndarray) -> np.ndarray:
+    P = np.zeros(MODEL_SIZE)
+    P[P_KBX], P[P_KBY], P[P_BBX], P[P_BBY] = 1e5, 1e4, 1e3, 1e2
+    P[P_HIPX:P_HIPX + 6] = hip_x0
+    return P
+
+
 def test_body_forces_are_internal():
     rng = np.random.default_rng(7)
     q, dq = rng.normal(size=(6, 4)), rng.normal(size=(6, 4))
     out = np.empty((6, 2))
-    body_forces(q, dq, -(np.arange(6) // 2) * 1.0, 1e5, 1e4, 1e3, 1e2, out)
+    body_forces(_body_state(q, dq), _body_model(-(np.arange(6) // 2) * 1.0), out)
     np.testing.assert_allclose(out.sum(axis=0), 0.0, atol=1e-7)
     # at rest in the nominal layout there is no force
     q2 = np.zeros((6, 4))
     q2[:, 0] = -(np.arange(6) // 2) * 1.0
-    body_forces(q2, np.zeros((6, 4)), q2[:, 0].copy(), 1e5, 1e4, 1e3, 1e2, out)
+    body_forces(_body_state(q2, np.zeros((6, 4))), _body_model(q2[:, 0].copy()), out)
     np.testing.assert_array_equal(out, 0.0)
+    # hip 2 (index 1) moved 1 cm forward stretches its links to hips 1 and 4 (0 and 3): each
+    # pulls with K_bx times 1 cm
+    q3 = q2.copy()
+    q3[1, 0] += 0.01
+    body_forces(_body_state(q3, np.zeros((6, 4))), _body_model(q2[:, 0].copy()), out)
+    np.testing.assert_allclose(out[:, 0], [1e3, -2e3, 0.0, 1e3, 0.0, 0.0], rtol=1e-9)
+    np.testing.assert_array_equal(out[:, 1], 0.0)

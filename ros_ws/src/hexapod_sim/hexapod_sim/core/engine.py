@@ -34,9 +34,9 @@ from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
 from .uneven_ground import ground_factors, note_touchdown
 from hexapod_common.core.gait import reference
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
-from hexapod_common.core.layout import (C0, OBS_FIELDS, P_BBX, P_BBY, P_BGX, P_BGY,
-                                        P_DT, P_G, P_HIPX, P_IMPL, P_KBX, P_KBY, P_KGX, P_KGY,
-                                        P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE, V0, X0)
+from hexapod_common.core.layout import (C0, OBS_FIELDS, P_BGX, P_BGY, P_DT, P_G, P_IMPL, P_KGX,
+                                        P_KGY, P_L1, P_L2, P_MF, P_MH, P_MK, P_MU, Q0, STATE_SIZE,
+                                        V0, X0)
 from hexapod_common.core.params import N_LEGS, HexapodParams
 
 
@@ -63,7 +63,7 @@ def scratch():  # type: ignore[no-untyped-def]
             np.empty((N_LEGS, 4)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
     """The state part of the forces and accelerations at state ``s`` (no torque needed).
 
@@ -74,22 +74,22 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
     :func:`solve` finishes the step for a given torque; the observation of a tick and the
     first physics step after it share one call.
     """
-    q, dq = legs(s)
     l1, l2 = P[P_L1], P[P_L2]
     h = P[P_DT] if P[P_IMPL] != 0.0 else 0.0
-    body_forces(q, dq, P[P_HIPX:P_HIPX + N_LEGS], P[P_KBX], P[P_KBY], P[P_BBX], P[P_BBY], fh)
+    body_forces(s, P, fh)
     for i in range(N_LEGS):
-        th1, th12, w1, w2 = q[i, 2], q[i, 2] + q[i, 3], dq[i, 2], dq[i, 3]
+        qi, vi = Q0 + 4 * i, V0 + 4 * i  # leg i's (x_H, y_H, theta1, theta2) and rates
+        th1, th12, w1, w2 = s[qi + 2], s[qi + 2] + s[qi + 3], s[vi + 2], s[vi + 3]
         c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th12), np.sin(th12)
         dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
-        x, y = q[i, 0] + dx, q[i, 1] + dy
+        x, y = s[qi] + dx, s[qi + 1] + dy
         c, xt = update_contact(x, y, s[C0 + i], s[X0 + i])
         note_touchdown(s, i, s[C0 + i], c)
         s[C0 + i] = c
         s[X0 + i] = xt
         if c != 0.0:
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
-            vx, vy = dq[i, 0] + dvx, dq[i, 1] + dvy
+            vx, vy = s[vi] + dvx, s[vi + 1] + dvy
             gx, gy = ground_factors(s, i)  # 1.0 on uniform ground (uneven_ground.py)
             bx, by = P[P_BGX] * gx, P[P_BGY] * gy
             fx, fy = spring_damper(x, y, vx, vy, xt, P[P_KGX] * gx, P[P_KGY] * gy, bx, by)
@@ -109,7 +109,7 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
         work[i, W_W], work[i, W_W + 1] = w1, w2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def leg_contact_solve(factor, bias, jac, c1, s1, c12, s12, w1, w2, P,  # type: ignore[no-untyped-def]
                       tm1, tm2, fhx, fhy, fx, fy, h, bx, by):
     """Accelerations of a leg whose foot is in contact, and the ground force it feels.
@@ -139,7 +139,7 @@ def leg_contact_solve(factor, bias, jac, c1, s1, c12, s12, w1, w2, P,  # type: i
     return a0, a1, a2, a3, lx, ly
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def solve(s, torque, P, fh, work, ff, qdd):  # type: ignore[no-untyped-def]
     """The torque part: from :func:`prepare`'s fh and work at state ``s`` and joint torques
     ``torque`` (6, 2) (N m), write F_RF into ff (6, 2) and ddq into qdd (6, 4)."""
@@ -180,7 +180,7 @@ def accelerations(s, torque, P, fh, ff, qdd):  # type: ignore[no-untyped-def]
     solve(s, torque, P, fh, work, ff, qdd)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def euler_step(s, qdd, dt):  # type: ignore[no-untyped-def]
     """The explicit Euler update of one physics step, in place: dq += dt ddq, then
     q += dt dq (the new dq); ``qdd`` (6, 4) from :func:`solve`, ``dt`` (s)."""
