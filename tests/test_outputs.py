@@ -105,3 +105,47 @@ def test_report_figures_are_drawn_on_the_workers_and_their_failures_raised(tmp_p
     here = plots.Drawer(InlineBackend())
     here.draw(plots.time_plot, series, "dyH", tmp_path / "here.png", "here")
     assert (tmp_path / "here.png").exists()
+
+
+def _sweep_curves(seed, checked, names, scale):
+    """Made-up sweep curves of two controllers over 40 values: a diverged point, unconverged
+    points and a band, ``scale`` times values of order 1-100."""
+    import numpy as np
+
+    from hexapod_bringup import plots
+
+    rng = np.random.default_rng(seed)
+    curves = {}
+    for c in ("pd_p", "pd_pf"):
+        for n in names:
+            y = scale * rng.uniform(1.0, 100.0, 40)
+            y[7] = np.nan
+            ok = rng.random(40) > 0.2
+            curves[(c, n)] = (y, ok & ~np.isnan(y), 0.95 * y, 1.05 * y)
+    return plots.SweepCurves(np.geomspace(0.1, 10.0, 40), checked, curves)
+
+
+@pytest.mark.parametrize("names", [("E_av",), ("E_av", "F_L")])
+def test_a_reused_sweep_canvas_draws_the_same_pixels_as_a_new_one(tmp_path, names):
+    """sweep_plot clears and reuses one figure per layout (its tick objects are most of a
+    figure's time): a figure drawn on a canvas that held another one, checked or not and on
+    another scale, is pixel for pixel the figure drawn on a new canvas."""
+    from matplotlib.image import imread
+
+    from hexapod_bringup import plots
+
+    pairs = [(_sweep_curves(1, True, names, 1.0), _sweep_curves(2, False, names, 1e3)),
+             (_sweep_curves(3, False, names, 1e3), _sweep_curves(4, True, names, 1.0))]
+    for k, (before, after) in enumerate(pairs):
+        plots._SWEEP_CANVASES.clear()
+        plots.sweep_plot(before, names, tmp_path / f"before{k}.png", "before")
+        canvas = next(iter(plots._SWEEP_CANVASES.values()))
+        plots.sweep_plot(after, names, tmp_path / f"reused{k}.png", "after")
+        assert next(iter(plots._SWEEP_CANVASES.values())) is canvas  # reused, not made anew
+        plots._SWEEP_CANVASES.clear()
+        plots.sweep_plot(after, names, tmp_path / f"new{k}.png", "after")
+        reused, new = imread(tmp_path / f"reused{k}.png"), imread(tmp_path / f"new{k}.png")
+        assert reused.shape == new.shape
+        assert (reused == new).all(), f"pair {k}: {(reused != new).any(axis=-1).sum()} pixels"
+        before = imread(tmp_path / f"before{k}.png")
+        assert before.shape != new.shape or (before != new).any()  # the test sees a change

@@ -163,35 +163,63 @@ def _checked_curve(ax, x: np.ndarray, sc: SweepCurves, c: str, name: str) -> Non
         ax.plot(x[div], np.zeros(div.sum()), "x", color=color, label=f"{label(c)} diverged")
 
 
+#: A sweep figure's canvas per layout (panels, log x, x label), kept by each process that
+#: draws: the next figure of the same layout clears and reuses its axes, whose tick objects
+#: matplotlib then reuses too (most of a figure's time when made anew; the PNG is the same
+#: pixel for pixel, tests/test_outputs.py).
+_SWEEP_CANVASES: dict[tuple[int, bool, str], Any] = {}
+
+
+def _sweep_canvas(panels: int, log_x: bool, x_label: str):  # type: ignore[no-untyped-def]
+    """(figure, axes row) for a sweep figure of ``panels`` panels, empty: made once per
+    layout, then cleared of the previous figure's curves, legends and data limits."""
+    key = (panels, log_x, x_label)
+    canvas = _SWEEP_CANVASES.get(key)
+    if canvas is not None:
+        fig, axes = canvas
+        for ax in axes:
+            for artist in [*ax.lines, *ax.collections]:
+                artist.remove()
+            if ax.get_legend() is not None:
+                ax.get_legend().remove()
+            ax.ignore_existing_data_limits = True
+            ax.set_autoscale_on(True)
+        return fig, axes
+    from matplotlib.ticker import FormatStrFormatter
+
+    width = 5.2 * panels  # inches
+    fig = _figure(figsize=(width, 3.6), dpi=110)
+    axes = list(fig.subplots(1, panels, squeeze=False)[0])
+    for ax in axes:
+        if log_x:
+            ax.set_xscale("log")
+            # plain numbers (10, 100, 1000 %): no mathtext to lay out, ~10 ms a figure
+            ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.set_xlabel(x_label)
+        ax.grid(alpha=0.3, which="both")
+    # fixed margins (room for 7-character tick labels) rather than tight_layout, whose
+    # extra text-measuring pass was a quarter of a sweep figure's time
+    fig.subplots_adjust(left=0.8 / width, right=1.0 - 0.15 / width, bottom=0.15, top=0.88,
+                        wspace=0.35)
+    _SWEEP_CANVASES[key] = (fig, axes)
+    return fig, axes
+
+
 def sweep_plot(res: SweepResult | SweepCurves, names: Sequence[str], path: Path, title: str,
                x_scale: float = 100.0, x_label: str = "% of base ground (K_x, K_y, B_x, B_y)",
                log_x: bool = True) -> Path:
     """Indices ``names`` vs the swept value (times ``x_scale``), both controllers; with a
     checked sweep, the dt-convergence band shaded and unconverged points hollow."""
     sc = res if isinstance(res, SweepCurves) else SweepCurves.of(res, names)
-    from matplotlib.ticker import FormatStrFormatter
-
-    fig = _figure(figsize=(5.2 * len(names), 3.6), dpi=110)
-    axes = fig.subplots(1, len(names), squeeze=False)
+    fig, axes = _sweep_canvas(len(names), log_x, x_label)
     x = sc.values * x_scale
-    for ax, name in zip(axes[0], names):
+    for ax, name in zip(axes, names):
         for c in sc.controllers:
             _checked_curve(ax, x, sc, c, name)
-        if log_x:
-            ax.set_xscale("log")
-            # plain numbers (10, 100, 1000 %): no mathtext to lay out, ~10 ms a figure
-            ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
         shown = "P_L (= F_L)" if name == "F_L" else name
         ax.set_ylabel(f"{shown} ({INDEX_UNITS[name]})")
-        ax.set_xlabel(x_label)
-        ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     fig.suptitle(title + ("" if sc.checked else " (not checked for dt convergence)"))
-    # fixed margins (room for 7-character tick labels) rather than tight_layout, whose
-    # extra text-measuring pass was a quarter of a sweep figure's time
-    width = 5.2 * len(names)  # inches
-    fig.subplots_adjust(left=0.8 / width, right=1.0 - 0.15 / width, bottom=0.15, top=0.88,
-                        wspace=0.35)
     fig.savefig(path, pil_kwargs=PNG_FAST)
     return path
 
