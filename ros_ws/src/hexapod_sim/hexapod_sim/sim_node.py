@@ -590,9 +590,7 @@ class SimNode(Node):
         except CdrError as err:
             self.guard.drop(T.RECORDED, M.UNDECODABLE, str(err))
             return
-        # never past the current tick (a key holder's stamp far ahead must not end the pacing)
-        self.pace.heard(min(C.tick_of(stamp, self.period_ns), self.ticks.tick),
-                        time.monotonic())
+        self.pace.heard(C.tick_of(stamp, self.period_ns), time.monotonic(), self.ticks.tick)
         self.recorders = self.recorded_sub.get_publisher_count()  # who a hold waits for
         if self.pace.holding:
             self._send()

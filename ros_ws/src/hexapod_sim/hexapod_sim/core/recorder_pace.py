@@ -35,8 +35,11 @@ class RecorderPace:
     gave_up: int = 0
     _since: float | None = None
 
-    def heard(self, tick: int, now: float) -> None:
-        """The recorder wrote tick ``tick`` (its newest joint state)."""
+    def heard(self, tick: int, now: float, current: int) -> None:
+        """The recorder wrote tick ``tick`` (its newest joint state); the sim is at tick
+        ``current``. A tick past ``current`` counts as ``current``: a stamp far ahead (a key
+        holder's) must not end the pacing, which then holds again ``lag`` ticks later."""
+        tick = min(tick, current)
         self.recorded = tick if self.recorded is None else max(self.recorded, tick)
         self.heard_at = now
 
