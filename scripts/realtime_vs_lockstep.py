@@ -38,8 +38,9 @@ def run(mode: str, a: argparse.Namespace, out: Path) -> tuple[int, dict, str]:
     try:
         doc = json.loads((bag / "indices.json").read_text())
     except (OSError, ValueError):
+        said = (proc.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
         sys.exit(f"realtime_vs_lockstep: the {mode} run left no indices.json "
-                 f"(exit {proc.returncode}): {proc.stderr.strip().splitlines()[-1:]}")
+                 f"(exit {proc.returncode}): {said}")
     log = Path(f"{bag}_logs/hexapod_sim.log").read_text(errors="replace")
     m = re.search(r"stopped at tick .*", log)
     return proc.returncode, doc, m[0] if m else "(no summary line)"

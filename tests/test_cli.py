@@ -72,3 +72,27 @@ def test_bench_sweep_refuses_bad_options_in_one_line(args, code, message):
     lines = out.stderr.strip().splitlines()
     assert message in lines[-1] and "Traceback" not in out.stderr
     assert "medians" not in out.stdout
+
+
+@pytest.mark.parametrize("args, code, message", [
+    (["--duration", "-1"], 1, "the lockstep run left no indices.json (exit 2): run_graph: "
+     "error: argument --duration: parameter 'run.duration' = -1.0 is invalid"),
+    (["--duration", "nan"], 1, "parameter 'run.duration' = nan is invalid"),
+    (["--controller", "pd_x"], 2, "argument --controller: invalid choice: 'pd_x'"),
+    (["--set", "ground.scale=-2"], 1, "parameter 'ground.scale' = -2"),
+    (["--set", "no_such.thing=1"], 1, "no_such.thing"),
+])
+def test_realtime_vs_lockstep_refuses_bad_options_in_one_line(args, code, message, tmp_path):
+    """scripts/realtime_vs_lockstep.py: a bad option, or one its graph runs refuse, is one
+    line and a non-zero exit before any run starts its graph."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "realtime_vs_lockstep.py"
+    out = subprocess.run([sys.executable, str(script), *args], capture_output=True,
+                         text=True, timeout=120, cwd=tmp_path)
+    assert out.returncode == code, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert message in lines[-1] and "Traceback" not in out.stderr
+    assert out.stdout == ""
