@@ -1,7 +1,18 @@
 """`hexapod simulate`: indices on stdout, JSON, one-line errors with a non-zero exit."""
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+def run_script(name, *args, cwd=None):
+    """scripts/<name> with ``args`` in this interpreter: the finished process."""
+    return subprocess.run([sys.executable, str(SCRIPTS / name), *args], capture_output=True,
+                          text=True, timeout=120, cwd=cwd)
 
 
 def test_simulate_prints_the_seven_indices(hexapod):
@@ -61,13 +72,7 @@ def test_simulate_says_where_a_live_change_falls_against_the_indices_window(hexa
 def test_bench_sweep_refuses_bad_options_in_one_line(args, code, message):
     """scripts/bench_sweep.py: a bad option, or a sweep the engine refuses, is one line and
     a non-zero exit before any figure is printed."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    script = Path(__file__).resolve().parents[1] / "scripts" / "bench_sweep.py"
-    out = subprocess.run([sys.executable, str(script), *args], capture_output=True,
-                         text=True, timeout=120)
+    out = run_script("bench_sweep.py", *args)
     assert out.returncode == code
     lines = out.stderr.strip().splitlines()
     assert message in lines[-1] and "Traceback" not in out.stderr
@@ -85,13 +90,7 @@ def test_bench_sweep_refuses_bad_options_in_one_line(args, code, message):
 def test_realtime_vs_lockstep_refuses_bad_options_in_one_line(args, code, message, tmp_path):
     """scripts/realtime_vs_lockstep.py: a bad option, or one its graph runs refuse, is one
     line and a non-zero exit before any run starts its graph."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    script = Path(__file__).resolve().parents[1] / "scripts" / "realtime_vs_lockstep.py"
-    out = subprocess.run([sys.executable, str(script), *args], capture_output=True,
-                         text=True, timeout=120, cwd=tmp_path)
+    out = run_script("realtime_vs_lockstep.py", *args, cwd=tmp_path)
     assert out.returncode == code, out.stderr
     lines = out.stderr.strip().splitlines()
     assert message in lines[-1] and "Traceback" not in out.stderr

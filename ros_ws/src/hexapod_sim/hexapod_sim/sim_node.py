@@ -35,13 +35,12 @@ from hexapod_common.core import topics as T
 from .core.actuator import saturate
 from .core.physics import Physics
 from .core.recorder_pace import RecorderPace
-from hexapod_common.core.errors import ParameterError
+from hexapod_common.core.errors import CdrError, ParameterError
 from hexapod_common.core.controller_names import check_name, engine_names, node_of
 from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
 from hexapod_common.core.switch_channel import ChannelError, SwitchServer
 from hexapod_common.core import cdr
 from hexapod_common.core import trace as _trace
-from hexapod_common.core.errors import CdrError
 from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
 from .core.uneven_ground import GroundDraws, pairs_for
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
