@@ -58,7 +58,8 @@ S1_CASES = (("10 kHz physics, 1 kHz control", 1e-4, 1e-3, 150.0),
             ("10 kHz physics, control every step", 1e-4, 1e-4, 60.0),
             ("paper experiments: 20 kHz physics, 10 kHz control", 5e-5, 1e-4, None))
 S1_TARGET = 150.0    # x real time at 1 kHz control
-S2_TARGET = 500.0    # simulated s per wall s
+S2_TARGET = 1000.0   # simulated s per wall s, both cores (issue 37)
+S2_TARGET_ONE = 500.0  # the same on one thread
 S3_TOL = 1e-9        # relative difference of H, c + g to MuJoCo's
 
 _N_ACCEL_ARGS = len(inspect.signature(dynamics.leg_accel.py_func).parameters)
@@ -400,12 +401,12 @@ def main(argv: list[str] | None = None) -> int:
         _row(rows, "S2", f"score_batch {s2['cases']} cases x {s2['duration']:g} s, sim s / wall "
              f"s ({s2['threads']} thr)", f">= {S2_TARGET:g}", f"{m:.0f}", f"{m / S2_TARGET:.2f}")
         m = _median(s2["cpu_rates"])
-        _row(rows, "S2", "  same, sim s / CPU s of the process (per core)", f">= {S2_TARGET:g}",
-             f"{m:.0f}", f"{m / S2_TARGET:.2f}")
+        _row(rows, "S2", "  same, sim s / CPU s of the process (per core)", f">= {S2_TARGET_ONE:g}",
+             f"{m:.0f}", f"{m / S2_TARGET_ONE:.2f}")
         if s2["one_thread_rate"] is not None:
             m1 = s2["one_thread_rate"]
-            _row(rows, "S2", "  same on 1 thread (parallel scaling)", f">= {S2_TARGET:g}",
-                 f"{m1:.0f}", f"{m1 / S2_TARGET:.2f}")
+            _row(rows, "S2", "  same on 1 thread (parallel scaling)", f">= {S2_TARGET_ONE:g}",
+                 f"{m1:.0f}", f"{m1 / S2_TARGET_ONE:.2f}")
         if s2["recording_rates"]:
             m = _median(s2["recording_rates"])
             _row(rows, "S2", "  same recording the last cycle (run_batch), sim s / wall s",

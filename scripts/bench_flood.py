@@ -1,22 +1,30 @@
 #!/usr/bin/env python3
-"""S7 (quality.md): what a process mirroring the tick topics costs a lockstep run.
+"""S7 (quality.md): what a process flooding the tick topics costs a lockstep run.
 
 Runs the lockstep graph (all five nodes, recording and authentication on) for --duration
-simulated seconds at --rate Hz, alternately without and with a *mirror*: a separate
-process on the graph's ROS_DOMAIN_ID, not one of the graph's nodes, that takes every
-message of the tick topics (joint states, foot forces, hip states, references, commands)
-and publishes it again, unchanged, on the same topic (a replayed copy of a genuine, signed
-message) at the rate it arrives, with --qos reliable or best_effort (the two common
-profiles, with the topic's durability; ``both`` publishes every copy once with each; a
-best-effort writer matches none of the graph's readers, which are all reliable). Every copy
-reaches every reader of its topic and must be refused there (replayed: the graph's nodes
-check the trailer before anything else).
+simulated seconds at --rate Hz, in rounds: without a flood, then with a flooding process
+on the graph's ROS_DOMAIN_ID (not one of the graph's nodes, without the run's key) from
+outside the run's DDS partition and from inside it (--attacker). The flood (--flood):
+
+* ``spray`` (default): every /hexapod/joint_states message copied onto each of the other
+  JointState topics of the graph (foot forces, hip states, references, commands), once
+  with each --qos profile (reliable, best effort: ``both``, the default, sends 8 copies a
+  tick);
+* ``mirror``: every message of the tick topics republished, unchanged, on its own topic.
+
+The graph keeps its tick topics in a partition of the run's own (dds_profile.py): from
+outside it, nothing reaches the graph's readers; from inside (an attacker who read the
+partition's name off the discovery traffic), every copy reaches every reader of its topic
+and is refused there in Python by its trailer (replayed, moved or forged). From outside
+the partition the flood reads no tick message, so it has nothing to copy: what it costs is
+its presence on the domain.
 
 Prints each run's wall time (tick 0 to the last tick, as the sim reports it), what the
-mirror sent and what the graph's nodes dropped, and the ratio of the median wall times
-with / without the mirror (target <= 1.5).
+flood sent and what the graph's nodes dropped, and the ratio of the median wall times
+with / without the flood (target <= 1.5).
 
-Usage: scripts/bench_flood.py [--rate 1000] [--duration 3] [--pairs 2]
+Usage: scripts/bench_flood.py [--rate 1000] [--duration 3] [--pairs 3]
+       [--flood spray|mirror] [--attacker outsider|insider|both]
        [--qos reliable|best_effort|both]
 (run through `scripts/env.sh`, or it re-executes itself inside it).
 """
@@ -41,9 +49,12 @@ NODES = ("metrics", "trajectory_generator", "pd_p_controller", "pd_pf_controller
 DROPPED = re.compile(r"dropped (\d+) messages")
 
 
-def mirror(qos_names: list[str], out: Path) -> int:
-    """The mirror process: republish every message of the tick topics until SIGINT/SIGTERM;
-    writes the number of copies sent to ``out``."""
+def flood(kind: str, qos_names: list[str], out: Path) -> int:
+    """The flooding process (until SIGINT/SIGTERM; writes the number of messages it sent to
+    ``out``): ``mirror`` republishes every message of the tick topics on its own topic;
+    ``spray`` copies every /hexapod/joint_states onto each of the other JointState topics of
+    the graph, once per QoS of ``qos_names`` (8 a tick with both). Outside the run's DDS
+    partition it reads nothing, so has nothing to copy."""
     import rclpy
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -57,40 +68,64 @@ def mirror(qos_names: list[str], out: Path) -> int:
 
     configure_middleware()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = Node("mirror", start_parameter_services=False)
+    node = Node("flood", start_parameter_services=False)
     # Woken at most every 0.5 ms: it keeps up with the tick rate without a wake-up per
     # message (what a flood that means to cost the graph, not itself, would do).
     loop = HotLoop(node, batch_interval=0.0005)
     sent = [0]
-    # Its own copies come back to its subscriptions (rclpy cannot ignore local
-    # publications): each is recognised by its bytes and not copied again.
-    own: Counter[bytes] = Counter()
-    for topic in (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE, T.JOINT_COMMANDS):
-        pubs = []
+    topics = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE, T.JOINT_COMMANDS)
+
+    def writers(topic: str) -> list:
+        out = []
         for name in qos_names:
             rel = (ReliabilityPolicy.RELIABLE if name == "reliable"
                    else ReliabilityPolicy.BEST_EFFORT)
             # the topic's durability, so that its transient-local readers match it too
-            pubs.append(node.create_publisher(JointState, topic, QoSProfile(
+            out.append(node.create_publisher(JointState, topic, QoSProfile(
                 depth=100, reliability=rel,
                 durability=C.TOPIC_QOS[topic].publisher().durability)))
+        return out
 
-        def copy(data: bytes, pubs: list = pubs) -> None:
-            if own[data]:
-                own[data] -= 1
-                if not own[data]:
-                    del own[data]
-                return
+    # Its own copies come back to its subscriptions (rclpy cannot ignore local
+    # publications): each is recognised by its bytes and not copied again.
+    own: Counter[bytes] = Counter()
+
+    def send(data: bytes, pubs: list, back: bool = False) -> None:
+        """Publish ``data`` with each of ``pubs`` (``back``: on a topic it reads too)."""
+        for pub in pubs:
+            pub.publish(data)
+        sent[0] += len(pubs)
+        if back:
             if len(own) > 100000:  # copies that never came back (best effort)
                 own.clear()
-            for p in pubs:
-                p.publish(data)
             own[data] += len(pubs)
-            sent[0] += len(pubs)
-        loop.subscribe(JointState, topic, copy,
-                       C.TOPIC_QOS[topic].subscriber(C.CONTROL_DEPTH))
+
+    def mine(data: bytes) -> bool:
+        if own[data]:
+            own[data] -= 1
+            if not own[data]:
+                del own[data]
+            return True
+        return False
+
+    if kind == "mirror":
+        for topic in topics:
+            pubs = writers(topic)
+
+            def copy(data: bytes, pubs: list = pubs) -> None:
+                if not mine(data):
+                    send(data, pubs, back=True)
+            loop.subscribe(JointState, topic, copy,
+                           C.TOPIC_QOS[topic].subscriber(C.CONTROL_DEPTH))
+    else:
+        sprayed = [w for t in topics[1:] for w in writers(t)]
+
+        def spray(data: bytes) -> None:
+            send(data, sprayed)
+        loop.subscribe(JointState, T.JOINT_STATES, spray,
+                       C.TOPIC_QOS[T.JOINT_STATES].subscriber(C.CONTROL_DEPTH))
     install_stop_signals(loop)
-    print("mirror: ready", flush=True)
+    print("flood: ready", flush=True)
     try:
         loop.spin()
     finally:
@@ -166,23 +201,36 @@ def rejection_cost(batches: int = 20, per_batch: int = 1000) -> dict[str, float]
     return out
 
 
-def run(rate: float, duration: float, domain: int, log_dir: Path, qos: str | None) -> dict:
-    """One lockstep run, with a mirror under ``qos`` (None: without)."""
+def attacker_env(env: dict[str, str], attacker: str) -> dict[str, str]:
+    """The flooding process's environment: an ``insider`` loads the run's DDS profile (as
+    one who read the partition's name off the discovery traffic would), an ``outsider``
+    does not; neither holds the run's key."""
+    from hexapod_common.core.msg_auth import KEY_ENV
+
+    drop = {KEY_ENV} | ({"FASTRTPS_DEFAULT_PROFILES_FILE"} if attacker == "outsider" else set())
+    return {k: v for k, v in env.items() if k not in drop}
+
+
+def run(rate: float, duration: float, domain: int, log_dir: Path, qos: str | None,
+        kind: str = "spray", attacker: str = "outsider") -> dict:
+    """One lockstep run, with a flood (``kind``, ``attacker``) under ``qos`` (None:
+    without)."""
     from hexapod_bringup.cmd_graph import GraphProcesses
 
     g = GraphProcesses(log_dir, env={"ROS_DOMAIN_ID": str(domain)},
                        overrides=(f"sim.control_period:={1.0 / rate!r}",))
-    mirror_proc = None
-    count = log_dir / "mirror_sent.txt"
+    flood_proc = None
+    count = log_dir / "flood_sent.txt"
     try:
         if qos is not None:
             names = ["reliable", "best_effort"] if qos == "both" else [qos]
-            mirror_proc = subprocess.Popen(
-                [sys.executable, __file__, "--mirror-node", ",".join(names), "--out",
-                 str(count)], env=g.env, stdout=subprocess.PIPE, text=True)
-            assert mirror_proc.stdout is not None
-            if mirror_proc.stdout.readline().strip() != "mirror: ready":
-                raise RuntimeError("the mirror did not start")
+            flood_proc = subprocess.Popen(
+                [sys.executable, __file__, "--flood-node", kind, "--qos-names",
+                 ",".join(names), "--out", str(count)],
+                env=attacker_env(g.env, attacker), stdout=subprocess.PIPE, text=True)
+            assert flood_proc.stdout is not None
+            if flood_proc.stdout.readline().strip() != "flood: ready":
+                raise RuntimeError("the flooding process did not start")
         g.start("metrics", f"bag_path:={log_dir / 'bag'}")
         for name in NODES[1:]:
             g.start(name)
@@ -193,13 +241,13 @@ def run(rate: float, duration: float, domain: int, log_dir: Path, qos: str | Non
         g.wait_exit("hexapod_sim", 60)
     finally:
         g.stop_all(order=NODES[1:] + ("metrics",))
-        if mirror_proc is not None:
-            mirror_proc.send_signal(signal.SIGINT)
+        if flood_proc is not None:
+            flood_proc.send_signal(signal.SIGINT)
             try:
-                mirror_proc.wait(30)
+                flood_proc.wait(30)
             except subprocess.TimeoutExpired:
-                mirror_proc.kill()
-                mirror_proc.wait()
+                flood_proc.kill()
+                flood_proc.wait()
     m = SUMMARY.search(g.log("hexapod_sim"))
     if m is None:
         raise RuntimeError(f"no summary in {log_dir / 'hexapod_sim.log'}")
@@ -214,36 +262,51 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rate", type=float, default=1000.0, help="control rate (Hz)")
     ap.add_argument("--duration", type=float, default=3.0, help="simulated s per run")
-    ap.add_argument("--pairs", type=int, default=2, help="runs without / with the mirror")
-    ap.add_argument("--qos", choices=("reliable", "best_effort", "both"), default="reliable",
-                    help="the mirror's publishers")
-    ap.add_argument("--mirror-node", help=argparse.SUPPRESS)
+    ap.add_argument("--pairs", type=int, default=3,
+                    help="rounds of a run without and runs with the flood")
+    ap.add_argument("--flood", choices=("spray", "mirror"), default="spray",
+                    help="spray: every state copied onto the 4 other JointState topics "
+                         "per QoS (default); mirror: every tick message republished")
+    ap.add_argument("--attacker", choices=("outsider", "insider", "both"), default="both",
+                    help="outsider: without the run's DDS profile; insider: with it (knows "
+                         "the partition from the discovery traffic); both (default)")
+    ap.add_argument("--qos", choices=("reliable", "best_effort", "both"), default="both",
+                    help="the flood's publishers (default both: 8 copies a tick)")
+    ap.add_argument("--flood-node", help=argparse.SUPPRESS)
+    ap.add_argument("--qos-names", help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    if args.mirror_node:
-        return mirror(args.mirror_node.split(","), args.out)
+    if args.flood_node:
+        return flood(args.flood_node, args.qos_names.split(","), args.out)
+    if args.rate <= 0 or args.duration <= 0 or args.pairs < 1:
+        ap.error("--rate and --duration must be > 0 and --pairs >= 1")
+    attackers = ["outsider", "insider"] if args.attacker == "both" else [args.attacker]
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; lockstep "
           f"at {args.rate:g} Hz for {args.duration:g} simulated s, recording and "
-          f"authentication on; mirror publishing with {args.qos} QoS", flush=True)
+          f"authentication on; flood '{args.flood}' publishing with {args.qos} QoS, from "
+          f"{' and '.join(attackers)} the run's DDS partition", flush=True)
     cost = rejection_cost()
     print("refusal on raw bytes by the input guard, us per message (median of 20 x 1000; "
           "target <= 5): " + ", ".join(f"{k} {v:.2f}" for k, v in cost.items()), flush=True)
     base = 120 + os.getpid() % 50
-    walls: dict[bool, list[float]] = {False: [], True: []}
+    walls: dict[str | None, list[float]] = {None: [], **{a: [] for a in attackers}}
     with tempfile.TemporaryDirectory(prefix="bench_flood_") as tmp:
         for i in range(args.pairs):
-            for j, with_mirror in enumerate((False, True)):
-                r = run(args.rate, args.duration, (base + 2 * i + j) % 101 + 1,
-                        Path(tmp) / f"run{i}_{j}", args.qos if with_mirror else None)
-                walls[with_mirror].append(r["wall"])
+            for j, who in enumerate([None] + attackers):
+                r = run(args.rate, args.duration, (base + 3 * i + j) % 101 + 1,
+                        Path(tmp) / f"run{i}_{j}", args.qos if who else None, args.flood,
+                        who or "outsider")
+                walls[who].append(r["wall"])
                 drops = ", ".join(f"{n} {d}" for n, d in r["dropped"].items())
-                print(f"pair {i + 1} {'with' if with_mirror else 'without'} the mirror: "
-                      f"{r['ticks']} ticks, wall {r['wall']:.2f} s, real-time factor "
-                      f"{r['rtf']:.3f}; copies sent {r['sent']}; dropped by the graph's "
+                print(f"round {i + 1} {'without a flood' if who is None else 'flood from ' + who}"
+                      f": {r['ticks']} ticks, wall {r['wall']:.2f} s, real-time factor "
+                      f"{r['rtf']:.3f}; messages sent {r['sent']}; dropped by the graph's "
                       f"nodes: {drops}", flush=True)
-    a, b = statistics.median(walls[False]), statistics.median(walls[True])
-    print(f"S7 wall time with / without the mirror (median of {args.pairs} each): "
-          f"{b:.2f} / {a:.2f} s = {b / a:.2f}  (target <= 1.5)")
+    a = statistics.median(walls[None])
+    for who in attackers:
+        b = statistics.median(walls[who])
+        print(f"S7 wall time with a flood from {who} / without (median of {args.pairs} "
+              f"each): {b:.2f} / {a:.2f} s = {b / a:.2f}  (target <= 1.5)")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     return 0
 

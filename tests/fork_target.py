@@ -17,7 +17,8 @@ def report(path: str) -> int:
     with open(path, "w") as f:
         json.dump({"argv": sys.argv, "env": os.environ.get("FORK_TEST", ""),
                    "pid": os.getpid(), "sid": os.getsid(0), "nice": os.nice(0),
-                   "name": name.value.decode(), "cwd": os.getcwd()}, f)
+                   "name": name.value.decode(), "cwd": os.getcwd(),
+                   "cmdline": open("/proc/self/cmdline", "rb").read().decode()}, f)
     print("on stdout")
     print("on stderr", file=sys.stderr)
     return 3

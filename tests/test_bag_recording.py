@@ -220,3 +220,31 @@ def test_message_definitions_come_from_the_installed_msg_files() -> None:
     assert msgdefs.lookup("no_msgs/msg/Nothing") is None
     with pytest.raises(msgdefs.MessageDefinitionError, match="no_msgs/msg/Nothing.msg not found"):
         msgdefs.load("no_msgs/msg/Nothing")
+
+
+def test_memory_stays_bounded_as_chunks_pile_up(tmp_path: Path) -> None:
+    """R6: what the writer keeps grows with the chunk indexes only (~100 bytes a chunk),
+    not with the messages written (it once kept every commit's reorder buffer and tail)."""
+    import tracemalloc
+
+    w = _writer(tmp_path / "long")
+    msg = _js(0)
+
+    def write(k0: int, k1: int) -> None:
+        for k in range(k0, k1):
+            for topic in (A, B):
+                w.write(topic, k * MS, msg)
+
+    write(0, 2000)
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        write(2000, 12000)  # ~7 MB of messages, ~450 chunks
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    w.close()
+    assert (tmp_path / "long" / "long_0.mcap").stat().st_size > 5_000_000
+    assert grown < 500_000, f"the writer kept {grown} bytes over 10000 ticks"
+    with open_bag(tmp_path / "long") as bag:
+        assert len(read_joint_state_arrays(bag, A).stamps) == 12000

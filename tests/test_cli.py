@@ -34,8 +34,15 @@ def test_simulate_json_matches_the_python_api(hexapod):
     p = load_params(**{"actuator.t_max": 150.0})
     for c in ("pd_p", "pd_pf"):
         assert doc[c]["status"] == "ok"
-        assert doc[c]["indices"]["eps_xH"] == pytest.approx(
-            simulate(p, c).indices.eps_xH, rel=1e-12)
+        sim = simulate(p, c)
+        assert doc[c]["indices"]["eps_xH"] == pytest.approx(sim.indices.eps_xH, rel=1e-12)
+        # every full gait cycle, the last one being the window (run.eval_cycles = 1)
+        cycles = doc[c]["cycles"]
+        assert [k["cycle"] for k in cycles] == [0, 1, 2]
+        assert cycles[-1]["eps_xF"] == doc[c]["indices"]["eps_xF"]
+        for k, i in zip(cycles, sim.outcome.cycles):
+            assert k["drift_xH"] == pytest.approx(i.drift_xH, rel=1e-12)
+            assert k["trk_xF"] == pytest.approx(i.trk_xF, rel=1e-12)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -69,6 +69,8 @@ def test_sweep_and_tune_take_pd_alpha(tmp_path):
     doc = json.loads((tmp_path / "tune.json").read_text())
     assert doc["controller"] == "pd_alpha"
     assert sorted(g["gains"]["kd1"] for g in doc["all"]) == [200.0, 250.0]
+    # the printed score is the objective ranked on: the stationary hip errors
+    assert r.stdout.count("trk_xH+eps_yH = ") == 2 and "eps_xH+eps_yH" not in r.stdout
 
 
 USER_MODULE = '''

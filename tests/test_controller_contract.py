@@ -9,7 +9,7 @@ import struct
 import pytest
 
 from hexapod_common import auth
-from hexapod_common.core.controller_names import check_name, name_of, node_of
+from hexapod_common.core.controller_names import check_name, name_of, node_of, reserved_hint
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.msg_auth import Rejected, Verifier, new_key_file, read_key_file
 
@@ -62,6 +62,12 @@ def test_naming_rule_is_one_to_one():
     assert node_of("my_controller") == "my_controller"
     assert name_of("my_controller") == "my_controller"
     assert name_of("x_controller") == "x_controller"
+    # a node named as a built-in controller serves none (its node is pd_p_controller)
+    assert name_of("pd_p") is None and node_of("pd_p") != "pd_p"
+    assert "served by the node pd_p_controller" in reserved_hint("pd_p")
+    assert reserved_hint("pd_p_controller") == reserved_hint("my_controller") == ""
+    for node in ("pd_p_controller", "pd_pf_controller", "my_controller", "x_controller"):
+        assert node_of(name_of(node)) == node
     for bad in ("", "pd/x", "1abc", "a-b", "a" * 65, 3):
         with pytest.raises(ParameterError, match="a controller name"):
             check_name(bad)

@@ -231,3 +231,44 @@ def test_switching_between_compiled_and_plugin_controllers():
     plain = run(p, "pd_p", 1.0)
     k = int(round(0.3 / p.sim.control_period))
     np.testing.assert_array_equal(r.obs[:k + 1], plain.obs[:k + 1])
+
+
+def test_a_parameters_kind_is_its_annotation_without_kind_named():
+    """`warmup: int = param(...)` refuses 2.5 with no kind=int written; a float parameter
+    whose default is written as an integer still takes 2.5; a default that does not fit its
+    kind is refused when the controller is registered."""
+    from dataclasses import dataclass
+
+    from hexapod_common.core.params import (check_value, register_controller_group,
+                                            unregister_controller_group)
+    from hexapod_control.core.controller_api import param
+
+    @dataclass(frozen=True)
+    class Kinds:
+        kp: float = param("stiffness (N m/rad)", 0.0, 1e9, default=20000)
+        warmup: int = param("ticks before the law acts", 0, 100, default=3)
+        on: bool = param("switch", default=True)
+        mode: str = param("mode", default="a", choices=("a", "b"))
+
+    register_controller_group("kinds_test", Kinds)
+    try:
+        assert check_value("kinds_test.kp", 2.5e4 + 0.5) == 25000.5
+        with pytest.raises(ParameterError, match=r"'kinds_test.warmup' = 2.5 is invalid: "
+                                                 r"allowed int in \[0, 100\]"):
+            check_value("kinds_test.warmup", 2.5)
+        assert check_value("kinds_test.warmup", 4) == 4
+        with pytest.raises(ParameterError, match="a string, where a boolean is expected"):
+            check_value("kinds_test.on", "yes")
+        with pytest.raises(ParameterError, match="kinds_test.mode"):
+            check_value("kinds_test.mode", "c")
+    finally:
+        unregister_controller_group("kinds_test")
+
+    @dataclass(frozen=True)
+    class Bad:
+        warmup: int = param("ticks", 0, 100, default=2.5)
+
+    with pytest.raises(TypeError, match="controller 'bad_test': the default of parameter "
+                                        "'warmup' does not fit it"):
+        register_controller_group("bad_test", Bad)
+    unregister_controller_group("bad_test")

@@ -69,10 +69,10 @@ def test_the_shared_memory_transport_is_sized_and_checked_as_documented(tmp_path
         return int(node.find("d:sec", NS).text) + int(node.find("d:nanosec", NS).text) * 1e-9
 
     lease, announce = seconds("leaseDuration"), seconds("leaseAnnouncement")
-    assert (lease, announce) == (LEASE_S, ANNOUNCE_S) == (2, 0.25)
+    assert (lease, announce) == (LEASE_S, ANNOUNCE_S) == (5, 0.25)
     assert int(_shm(path).find("d:port_queue_capacity", NS).text) == PORT_QUEUE == 1024
     check = int(_shm(path).find("d:healthy_check_timeout_ms", NS).text)
-    assert check == HEALTHY_CHECK_MS and 1000 * lease < check <= 3000 and lease >= 4 * announce
+    assert check == HEALTHY_CHECK_MS and 1000 * lease < check <= 6000 and lease >= 4 * announce
 
 
 def test_a_reader_may_hold_as_many_untaken_samples_as_its_depth(tmp_path):
@@ -250,3 +250,42 @@ def test_the_launcher_looks_at_a_running_nodes_locks_until_two_looks_agree(
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_the_tick_topics_are_put_in_the_runs_partition_with_the_default_settings(tmp_path):
+    """Every reader and writer of the tick topics gets a profile of its own (named as the
+    topic: rmw_fastrtps takes it instead of the default) with the run's partition and the
+    default profile's settings; nothing else is partitioned, and without a partition
+    (HEXAPOD_AUTH=off) there is no such profile."""
+    from hexapod_common.core import topics as T
+    from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV, new_key_file, read_key_file
+    from hexapod_common.runtime.dds_profile import (PARTITIONED_TOPICS, partition_of,
+                                                    run_partition)
+
+    key_path = new_key_file(tmp_path)
+    env = {KEY_ENV: str(key_path)}
+    part = run_partition(env)
+    assert part == partition_of(read_key_file(key_path)) and part.startswith("hexapod_")
+    assert partition_of(os.urandom(32)) != part  # another run, another partition
+    assert run_partition({**env, AUTH_ENV: "off"}) is None and run_partition({}) is None
+    assert set(PARTITIONED_TOPICS) == {T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES,
+                                       T.REFERENCE, T.JOINT_COMMANDS, T.RECORDED}
+    (tmp_path / "a").mkdir()
+    profiles = ET.parse(private_profile(tmp_path / "a", partition=part)).getroot().find(
+        "d:profiles", NS)
+    default = {k: profiles.find(f"d:{k}[@is_default_profile='true']", NS)
+               for k in ("data_writer", "data_reader")}
+    for kind, base in default.items():
+        named = {e.get("profile_name"): e for e in profiles.findall(f"d:{kind}", NS)
+                 if e.get("is_default_profile") != "true"}
+        assert set(named) == set(PARTITIONED_TOPICS), kind
+        for topic, e in named.items():
+            prop = e.find("d:propertiesPolicy/d:properties/d:property", NS)
+            assert (prop.find("d:name", NS).text, prop.find("d:value", NS).text) == (
+                "partitions", part), topic
+            for child in base:  # the default's settings, repeated
+                same = [ET.canonicalize(ET.tostring(x), strip_text=True)
+                        for x in (e.find(child.tag), child)]
+                assert same[0] == same[1], (topic, child.tag)
+    open_root = ET.parse(private_profile(tmp_path)).getroot().find("d:profiles", NS)
+    assert len(open_root.findall("d:data_writer", NS)) == 1

@@ -154,16 +154,21 @@ def test_scoring_on_the_fly_equals_recording_then_scoring_bit_for_bit():
              Case(p, "pd_alpha"), Case(p.with_values(**{"body.k_x": 1e11}), "pd_p")]
     k_a, k_b = window_ticks(p, 3.0)
     dt = p.sim.control_period
-    scored = score_batch(cases, 3.0, (k_a, k_b))
-    recorded = run_batch(cases, 3.0, k_a * dt)
-    assert scored.window == (k_a * dt, k_b * dt)
+    scored = score_batch(cases, 3.0, (0, k_b), windows=3)  # every gait cycle
+    recorded = run_batch(cases, 3.0, 0.0)
+    assert scored.window == (0.0, k_b * dt) and scored.sums.shape[:2] == (5, 3)
     assert list(scored.ok) == list(recorded.ok) == [True, True, True, True, False]
-    m = k_b - k_a + 1
-    for acc, obs in zip(scored.sums[:4], recorded.obs[:4]):
-        on_the_fly = sums_from_accumulator(acc, dt)
-        offline = sums_from_obs(obs[:m], recorded.reference.hip[:m],
-                                recorded.reference.foot[:m], dt)
-        assert on_the_fly.indices() == offline.indices()
-        assert np.array_equal(on_the_fly.sq_err, offline.sq_err)
+    m = k_b // 3
+    for accs, obs in zip(scored.sums[:4], recorded.obs[:4]):
+        for w, acc in enumerate(accs):
+            sl = slice(w * m, (w + 1) * m + 1)
+            on_the_fly = sums_from_accumulator(acc, dt)
+            offline = sums_from_obs(obs[sl], recorded.reference.hip[sl],
+                                    recorded.reference.foot[sl], dt)
+            assert on_the_fly.indices() == offline.indices()
+            assert np.array_equal(on_the_fly.sq_err, offline.sq_err)
+            assert np.array_equal(on_the_fly.x_err, offline.x_err)
+    with pytest.raises(Exception, match="windows"):
+        score_batch(cases[:1], 3.0, (0, k_b), windows=7)
     with pytest.raises(Exception, match="window"):
         score_batch(cases[:1], 3.0, (k_b, k_a))

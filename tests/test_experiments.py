@@ -94,18 +94,21 @@ def test_dask_backend_needs_an_address_and_a_reachable_scheduler():
         make_backend("mpi")
 
 
-def _outcome(p, eps_x, eps_y=0.03, dist=1.0, ok=True):
-    idx = Indices(1.0, 1.0, 1.0, eps_x, eps_y, 0.0, 0.0, dist) if ok else None
-    return Outcome(Case(p, "pd_pf"), idx, (2.0, 3.0), "ok" if ok else "diverged")
+def _outcome(p, eps_x, eps_y=0.03, status="ok"):
+    """An outcome whose hip errors are eps_x (its offset-free part trk_xH too) and eps_y."""
+    idx = (Indices(1.0, 1.0, 1.0, eps_x, eps_y, 0.0, 0.0, 1.0, trk_xH=eps_x)
+           if status == "ok" else None)
+    return Outcome(Case(p, "pd_pf"), idx, (2.0, 3.0), status)
 
 
 def test_select_best_rejects_diverged_and_non_walking():
     p = load_params()
     gains = [{"kp1": float(k)} for k in range(5)]
-    outs = [_outcome(p, 0.5), _outcome(p, 0.0, ok=False),          # diverged: no score
-            _outcome(p, 0.001, dist=0.2),                            # barely moved
-            _outcome(p, 0.01, eps_y=6 * 0.5),                        # hips sank
-            _outcome(p, 0.2)]                                        # the planted best
+    # not walking: the engine's walking.not_walking said so (tests/test_walking.py)
+    outs = [_outcome(p, 0.5), _outcome(p, 0.0, status="diverged"),  # diverged: no score
+            _outcome(p, 0.001, status="fallen"),                      # barely moved
+            _outcome(p, 0.01, status="fallen"),                       # hips sank
+            _outcome(p, 0.2)]                                         # the planted best
     best, scores, diverged, not_walking = select_best(gains, outs, p)
     assert best == 4 and (diverged, not_walking) == (1, 2)
     assert np.isnan(scores[1:4]).all() and scores[4] == pytest.approx(0.23)
@@ -113,10 +116,12 @@ def test_select_best_rejects_diverged_and_non_walking():
         select_best(gains[:2], outs[1:3], p)
 
 
-def test_tuner_finds_the_planted_optimum():
-    """A 2x2x2 grid around the params file's PD-P&F gains, where the planted best is the
-    params file's own set (the others are ten times softer or derivative-dominated); the
-    tuner's choice must equal the argmin of independent runs. Rejection is covered above."""
+def test_tuner_finds_the_argmin_of_independent_runs():
+    """A 2x2x2 grid around the params file's PD-P&F gains (the others ten times softer or
+    derivative-dominated); the tuner's choice must equal the argmin of independent runs.
+    (On eps_xH + eps_yH the params file's set was the best; on the stationary trk_xH +
+    eps_yH a soft, derivative-dominated set that drifts more is: the objective does not see
+    the drift, which E5's tables give beside it.) Rejection is covered above."""
     p = load_params()
     grid = {"kp1": [2050.0, 20500.0], "kp2": [2200.0, 22000.0], "kd1": [110.0, 1e6]}
     res = tune(p, "pd_pf", grid, backend=InlineBackend())
@@ -124,10 +129,12 @@ def test_tuner_finds_the_planted_optimum():
     for g in res.gains:
         s = simulate(p.with_values(**{f"pd_pf.{k}": v for k, v in g.items()}), "pd_pf")
         scores[tuple(g.values())] = hip_score(s.outcome) if walking(s.outcome, p) else math.inf
-    assert res.best == {"kp1": 20500.0, "kp2": 22000.0, "kd1": 110.0}
-    assert min(scores, key=scores.get) == (20500.0, 22000.0, 110.0)
-    assert res.best_score == pytest.approx(res.reference_score)
-    assert res.improvement == pytest.approx(0.0, abs=1e-12)
+    best = min(scores, key=scores.get)
+    assert tuple(res.best.values()) == best
+    assert res.best_score == pytest.approx(scores[best], rel=1e-9)
+    ref = scores[(20500.0, 22000.0, 110.0)]  # the params file's set
+    assert res.reference_score == pytest.approx(ref, rel=1e-9)
+    assert res.improvement == pytest.approx(1.0 - scores[best] / ref, rel=1e-9)
     assert len(res.gains) == 8 and np.all(np.isfinite(res.scores))
 
 
@@ -259,3 +266,20 @@ def test_worker_chunks_are_wide_but_leave_every_worker_the_same_number():
     outs = run_cases(cases, 1.0, backend)
     assert backend.sizes == [11, 11, 11, 9]
     assert [o.case for o in outs] == cases
+
+
+@pytest.mark.parametrize("controller", ["pd_p", "pd_pf"])
+def test_the_tuned_gains_are_the_same_at_10_and_20_cycles(controller):
+    """E5's objective (trk_xH + eps_yH) does not grow with the run: the grid's best set
+    scored on cycle 10 is the one scored on cycle 20, and its score moves by < 1 mm."""
+    from hexapod_bringup.core.experiments import HIP_OBJECTIVE
+    from hexapod_common.core.params import load_params
+
+    assert HIP_OBJECTIVE == ("trk_xH", "eps_yH")
+    p = load_params(**{"actuator.t_max": 400.0})
+    g = p.gains(controller)
+    grid = {"kp1": [g.kp1 * f for f in (0.75, 1.0, 1.25)],
+            "kd1": [g.kd1 * f for f in (0.75, 1.0, 1.25)]}
+    at10, at20 = tune(p, controller, grid, duration=11.0), tune(p, controller, grid, duration=21.0)
+    assert at10.best == at20.best
+    assert abs(at10.best_score - at20.best_score) < 1e-3

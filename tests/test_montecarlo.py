@@ -118,15 +118,15 @@ def _result(diffs, base=0.05):
     from hexapod_bringup.core.montecarlo import McRun, MonteCarloResult
 
     runs = {"pd_p": [], "pd_pf": []}
-    for k, d in enumerate(diffs):
-        runs["pd_p"].append(McRun("pd_p", k, "ok", {"eps_xH": base, "eps_yH": 0.0}, {}))
-        runs["pd_pf"].append(McRun("pd_pf", k, "ok", {"eps_xH": base + d, "eps_yH": 0.0}, {}))
+    for k, d in enumerate(diffs):  # E8 decides on the stationary hip errors trk_xH + eps_yH
+        runs["pd_p"].append(McRun("pd_p", k, "ok", {"trk_xH": base, "eps_yH": 0.0}, {}))
+        runs["pd_pf"].append(McRun("pd_pf", k, "ok", {"trk_xH": base + d, "eps_yH": 0.0}, {}))
     return MonteCarloResult(("pd_p", "pd_pf"), tuple(range(len(diffs))), 0.2, 1.0, 400.0, 3.0,
                             runs)
 
 
 def test_e8_decides_the_winner_by_the_paired_interval_and_plans_seeds():
-    from hexapod_bringup.core.montecarlo import decide
+    from hexapod_bringup.core.montecarlo import McRun, decide, hip_errors
 
     better = decide(_result([-0.010, -0.012, -0.011, -0.009]), "pd_p", "pd_pf")
     assert better.winner == "pd_pf" and better.difference.high < 0
@@ -140,6 +140,18 @@ def test_e8_decides_the_winner_by_the_paired_interval_and_plans_seeds():
     n = noisy.seeds_needed
     assert t_quantile(0.975, n - 1) * s / math.sqrt(n) < m
     assert t_quantile(0.975, n - 2) * s / math.sqrt(n - 1) >= m
+    # the same runs scored on one gait cycle decide on that cycle's numbers
+    res = _result([-0.010, -0.012, -0.011, -0.009])
+    cyc = {"pd_p": ({"trk_xH": 0.02, "eps_yH": 0.0},),
+           "pd_pf": ({"trk_xH": 0.03, "eps_yH": 0.0},)}
+    res = type(res)(res.controllers, res.seeds, res.spread, res.ground_scale, res.t_max,
+                    res.duration, {c: [McRun(r.controller, r.seed, r.status, r.indices, {},
+                                             cyc[c]) for r in v] for c, v in res.runs.items()})
+    assert decide(res, "pd_p", "pd_pf").winner == "pd_pf"
+    at0 = res.at_cycle(0)
+    assert list(hip_errors(at0, "pd_pf")) == [0.03] * 4
+    assert decide(at0, "pd_p", "pd_pf").winner == "pd_p"  # on cycle 0 PD-P is lower
+    assert res.at_cycle(1).diverged("pd_p") == 4  # no cycle 1: no indices there
 
 
 def test_cli_grid_of_grounds_and_spreads_compares_two_controllers():

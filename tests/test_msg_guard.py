@@ -320,3 +320,45 @@ def test_forged_replayed_moved_and_garbage_messages_are_counted_and_never_decode
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_an_endpoint_whose_node_is_not_known_yet_is_named_later_by_its_name(tmp_path,
+                                                                          monkeypatch):
+    """rmw lists a publisher whose node it has not discovered yet as
+    _NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_ (the graph's answer is replaced here by
+    that: it cannot be made on demand); the guard names no such phantom, and names the
+    publisher once its node is known, at its next look."""
+    rclpy = pytest.importorskip("rclpy", reason="the guard lives on the node side")
+    from types import SimpleNamespace
+
+    from rclpy.context import Context
+
+    from hexapod_common.core import topics as T
+    from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV
+    from hexapod_common.runtime import input_guard
+    from hexapod_common.runtime.input_guard import InputGuard
+
+    monkeypatch.setenv(KEY_ENV, str(new_key_file(tmp_path)))
+    monkeypatch.setenv(AUTH_ENV, "on")
+    monkeypatch.setattr(input_guard, "RELOOK", 0.0)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0) % 100 + 101)
+    try:
+        node = rclpy.create_node("guard_phantom_test", context=ctx,
+                                 start_parameter_services=False)
+        seen = [SimpleNamespace(node_name="_NODE_NAME_UNKNOWN_",
+                                node_namespace="_NODE_NAMESPACE_UNKNOWN_"),
+                SimpleNamespace(node_name="pd_pf_controller", node_namespace="/")]
+        monkeypatch.setattr(node, "get_publishers_info_by_topic", lambda topic: list(seen))
+        log = _Lines()
+        guard = InputGuard(node, log)
+        assert guard.joint_state(T.JOINT_COMMANDS, b"\x00\x01\x00\x00" * 8, 1_000_000) is None
+        assert guard.outsiders == {} and guard.present == {}
+        assert "UNKNOWN" not in guard.summary() and "UNKNOWN" not in "".join(log.lines)
+        seen[0] = SimpleNamespace(node_name="_ros2cli_123", node_namespace="/")
+        guard.refresh()  # the next look (no new drop): the node is known now
+        assert guard.outsiders == {T.JOINT_COMMANDS: {"/_ros2cli_123"}}
+        assert guard.values()["outside_publishers"] == f"{T.JOINT_COMMANDS}: /_ros2cli_123"
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -34,14 +34,25 @@ def test_a_forked_node_runs_with_its_own_command_line_environment_log_and_sessio
     assert seen["env"] == "seen" and seen["pid"] == p.pid == seen["sid"]  # own session
     assert seen["nice"] == os.nice(0) + 5 and seen["cwd"] == os.getcwd()
     assert seen["name"] == "a_long_node_nam"  # the kernel keeps 15 characters
+    # ps -f and pgrep -f: the node's name, not the fork server's command line
+    assert seen["cmdline"].rstrip("\0") == "a_long_node_name_here"
     assert log.read_text().splitlines() == ["before", "on stdout", "on stderr"]  # appended
 
 
 def test_wait_times_out_and_a_signal_gives_popens_exit_code(tmp_path):
     flag = tmp_path / "flag"
-    p = _start("wait_for_term", str(flag), log=tmp_path / "node.log")
+    p = _start("wait_for_term", str(flag), log=tmp_path / "node.log",
+               name=f"fork_wait_{os.getpid()}")
     with pytest.raises(subprocess.TimeoutExpired):
         p.wait(0.2)
+    end = time.monotonic() + 30  # until the node has set its title (a busy machine)
+    while True:
+        found = subprocess.run(["pgrep", "-f", f"fork_wait_{os.getpid()}"],
+                               capture_output=True, text=True)
+        if found.stdout.split() or time.monotonic() > end:
+            break
+        time.sleep(0.05)
+    assert found.stdout.split() == [str(p.pid)], found
     assert p.poll() is None and p.returncode is None
     p.kill()
     assert p.wait(30) == -signal.SIGKILL

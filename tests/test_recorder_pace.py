@@ -65,3 +65,17 @@ def test_the_lag_stays_inside_what_the_publishers_keep_for_the_recorder():
     # a held tick's recorder is at most RECORDER_LAG + one report behind: the writers'
     # histories (HISTORY_DEPTH ticks) still hold every message it has not taken
     assert T.RECORDER_LAG + T.RECORDED_EVERY < T.HISTORY_DEPTH // 2
+
+
+def test_a_silent_recorder_is_borne_while_on_the_graph_and_let_go_once_it_has_left():
+    p = RecorderPace(lag=100, patience=5.0)
+    p.heard(0, 0.0, 10_000)
+    assert p.behind(500) and not p.behind(100)
+    on_graph = [True]
+    assert p.hold_until(500, 1.0, lambda: on_graph[0], cap=30.0) == pytest.approx(5.0)
+    # silent for 5 s but still on the graph (stopped, starved): borne up to the cap
+    assert p.hold_until(500, 5.0, lambda: on_graph[0], cap=30.0) == pytest.approx(30.0)
+    on_graph[0] = False  # its lease ran out: it left, it is not given up on
+    assert p.hold_until(500, 6.0, lambda: on_graph[0], cap=30.0) is None
+    assert p.left == 1 and p.gave_up == 0 and p.recorded is None and not p.holding
+    assert p.held_s == pytest.approx(5.0)

@@ -10,7 +10,8 @@ from hexapod_sim.core.actuator import saturate
 from hexapod_sim.core.physics import Physics
 from hexapod_common.core.layout import O_THV, O_TQ, P_TMAX
 from hexapod_common.core.params import HexapodParams, load_params
-from hexapod_sim.core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
+from hexapod_sim.core.tick_machine import (FIRST_TICK_WAIT, LIVENESS_LOOK, SWITCH_WINDOW,
+                                           Outcome, TickMachine, Wait)
 
 PERIOD = 1e-3
 FAST = {"sim.dt": 1e-4, "sim.control_period": PERIOD, "sim.hold_time": 0.005,
@@ -75,7 +76,7 @@ def test_lockstep_applies_each_command_at_once_and_equals_the_engine() -> None:
     m.start(0.0)
     for k in range(10):
         wait, when, frame = publish(m, float(k))
-        assert (wait, when, frame) == (Wait.TIMEOUT, k + p.sim.lockstep_timeout, "pd_pf")
+        assert (wait, when, frame) == (Wait.TIMEOUT, k + LIVENESS_LOOK, "pd_pf")
         assert m.command(m.stamp, "pd_pf", demand(k), k + 1.1e-4) is Outcome.SEND
         saturate(demand(k).reshape(6, 2), ref.P[P_TMAX], torque)
         ref.advance_tick(torque)
@@ -118,6 +119,39 @@ def test_missed_tick_holds_the_torque_and_says_so_in_the_next_frame() -> None:
     assert "answers again at tick 2" in rec.lines[-1][1]
 
 
+def test_lockstep_waits_for_a_living_controller_up_to_the_cap_and_no_longer() -> None:
+    m, rec, p = machine(**{"sim.lockstep_timeout": 3.0})
+    m.start(0.0)
+    publish(m, 0.0)
+    m.command(m.stamp, "pd_pf", demand(0), 0.0)
+    wait, when, _ = publish(m, 1.0)
+    assert (wait, when) == (Wait.TIMEOUT, 1.0 + LIVENESS_LOOK)
+    # alive (stopped, starved): look again every LIVENESS_LOOK s, up to the cap
+    assert m.waiting(1.5, alive=True) == 2.0
+    assert m.waiting(3.9, alive=True) == 4.0  # the cap: 3 s after the tick went out
+    assert m.command(m.stamp, "pd_pf", demand(1), 3.95) is Outcome.SEND  # it answers
+    assert m.missed == 0 and m.long_waits == 1 and m.longest_wait == pytest.approx(2.9)
+    assert m.waiting(4.0, alive=True) is None  # answered: nothing to wait for
+    # a controller that has left: missed at the first look, as before
+    publish(m, 5.0)
+    assert m.waiting(5.5, alive=False) is None
+    m.timeout()
+    assert m.missed == 1 and m.cap_hits == 0
+    # silent already: one period a tick, whatever its liveness
+    publish(m, 6.0)
+    assert m.waiting(6.001, alive=True) is None
+    m.timeout()
+    assert m.missed == 2
+    # alive but hung past the cap: missed, and said
+    m2, rec2, _ = machine(**{"sim.lockstep_timeout": 1.0})
+    m2.start(0.0)
+    publish(m2, 0.0)
+    assert m2.waiting(0.5, alive=True) == 1.0
+    assert m2.waiting(1.0, alive=True) is None and m2.cap_hits == 1
+    assert "sim.lockstep_timeout (1 s) reached" in rec2.lines[-1][1]
+    assert rec2.lines[-1][0] == "warning"
+
+
 def test_silence_beyond_hold_time_falls_back_to_joint_damping_until_a_command() -> None:
     m, rec, p = machine()
     m.start(0.0)
@@ -145,7 +179,7 @@ def test_realtime_on_time_late_and_missed() -> None:
     m, rec, p = machine("realtime")
     m.start(0.0)
     wait, when, _ = publish(m, 0.0)
-    assert (wait, when) == (Wait.PERIOD_END, p.sim.lockstep_timeout)  # tick 0 waits
+    assert (wait, when) == (Wait.PERIOD_END, FIRST_TICK_WAIT)  # tick 0 waits
     assert m.command(0, "pd_pf", demand(0), 0.2) is Outcome.SCHEDULE  # the clock starts
     assert m.t0 == pytest.approx(0.2 - PERIOD)
     m.period_end(0.2)  # advanced already: nothing more is applied

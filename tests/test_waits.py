@@ -2,6 +2,10 @@
 through its end summary, which the graph launcher reads back to explain missed ticks."""
 from __future__ import annotations
 
+import math
+
+import pytest
+
 from hexapod_control.core.waits import InputWaits, parse
 
 
@@ -30,3 +34,26 @@ def test_the_cause_names_the_missing_input_and_stays_quiet_for_tick_0():
     assert cause.endswith("; 12 given up unanswered")
     assert "foot forces" not in cause
     assert "3 for their foot forces" in InputWaits(3, 0, 3, 0).cause()
+
+
+def test_a_state_answered_at_once_is_no_wait_and_the_warning_names_the_missing_input():
+    """A state answered at once while an older one still waits (lockstep after a missed tick:
+    the sim went on) is no wait: not counted, no warning (it read 'the  of tick 805788 came
+    after its state'). A state that waits is named with the input it waits for."""
+    import types
+
+    pytest.importorskip("rclpy", reason="the controller node needs rclpy (scripts/setup.sh)")
+    from hexapod_control.controller_node import WARN_AFTER, ControllerNode
+
+    said: list[str] = []
+    period = 1_000_000
+    node = types.SimpleNamespace(
+        refs={5 * period: object()}, forces={5 * period: object(), 6 * period: object()},
+        waits=InputWaits(waited=WARN_AFTER), warned_at=-math.inf, period_ns=period,
+        log=types.SimpleNamespace(warning=said.append))
+    ControllerNode._count_wait(node, 5 * period)  # both inputs there: answered at once
+    assert said == [] and node.waits == InputWaits(waited=WARN_AFTER)
+    ControllerNode._count_wait(node, 6 * period)  # its reference is late
+    assert node.waits == InputWaits(waited=WARN_AFTER + 1, reference=1)
+    assert len(said) == 1 and said[0].startswith(
+        "the reference of tick 6 came after its state (the newest reference is of tick 5)")

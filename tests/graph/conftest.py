@@ -27,7 +27,7 @@ _counter = itertools.count()
 #: overrides these (later overrides win), which keeps lockstep runs and bags small. The
 #: lockstep wait for a command is 5 s, not 0.5: the suite runs graphs side by side on two
 #: workers, where a node can stall past 0.5 s; a test of the timeout sets its own.
-FAST_TIMING = ("sim.dt:=0.0001", "sim.control_period:=0.001", "sim.lockstep_timeout:=5.0")
+FAST_TIMING = ("sim.dt:=0.0001", "sim.control_period:=0.001")
 #: Everything but the recorder stops first, so that the recorder gets their last messages.
 STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
               "metrics")
@@ -40,15 +40,33 @@ def fast_params(**overrides: Any) -> Any:
     return load_params(**{"sim.dt": 1e-4, "sim.control_period": 1e-3, **overrides})
 
 
+def domain_range() -> tuple[int, int]:
+    """The ROS_DOMAIN_IDs this session's graphs may take: HEXAPOD_TEST_DOMAINS="LO-HI"
+    (inclusive; default 1-100), so that test sessions of two checkouts on one machine can be
+    kept apart."""
+    spec = os.environ.get("HEXAPOD_TEST_DOMAINS", "1-100")
+    try:
+        lo, hi = (int(v) for v in spec.split("-"))
+    except ValueError:
+        raise SystemExit(f"HEXAPOD_TEST_DOMAINS={spec!r} is invalid: give LO-HI, "
+                         "e.g. 1-100") from None
+    if not 0 <= lo <= hi <= 232:
+        raise SystemExit(f"HEXAPOD_TEST_DOMAINS={spec!r} is invalid: allowed 0 <= LO <= HI "
+                         "<= 232")
+    return lo, hi
+
+
 def next_domain_id() -> int:
-    """A ROS_DOMAIN_ID in 1..100 unlikely to be used by a concurrent test session, and never
-    by another worker of this one (pytest-xdist: worker w of n takes the ids = w + 1 mod n)."""
+    """A ROS_DOMAIN_ID of :func:`domain_range` unlikely to be used by a concurrent test
+    session, and never by another worker of this one (pytest-xdist: worker w of n takes the
+    ids = lo + w mod n)."""
+    lo, hi = domain_range()
     worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:]
     w = int(worker) if worker.isdigit() else 0
     n = max(1, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
     session = os.getppid() if n > 1 else os.getpid()  # the workers' common parent
-    slot = (session * 13 + next(_counter) * 7) % (100 // n)
-    return 1 + slot * n + w
+    slot = (session * 13 + next(_counter) * 7) % max(1, (hi - lo + 1) // n)
+    return lo + slot * n + w
 
 
 def _graphs(tmp: Path) -> Iterator[Callable[..., GraphProcesses]]:
@@ -93,6 +111,11 @@ def sim_summary(log: str) -> dict[str, float]:
     held = re.search(r"(\d+) holds for the recorder \(([\d.]+) s\)", log[m.start():])
     assert held, log[m.start():]
     out["recorder_holds"], out["recorder_held_s"] = int(held[1]), float(held[2])
+    waits = re.search(r"(\d+) long waits for a living controller \(longest ([\d.]+) s; "
+                      r"(\d+) at the cap\)", log[m.start():])
+    if waits:
+        out["long_waits"], out["longest_wait_s"] = int(waits[1]), float(waits[2])
+        out["cap_hits"] = int(waits[3])
     return out
 
 

@@ -4,6 +4,7 @@ a fuzzer that sends malformed messages on every topic the graph subscribes to.
 Run as a script (a real, separate node process; not one of the graph's nodes)::
 
     python hostile_node.py rogue|fuzz --out COUNTS.json [--name NODE] [--seed N] [--sign]
+        [--blind]
 
 * ``rogue``: answers every /hexapod/joint_states with its own command (same stamp and
   frame_id, +80 N m on every joint), also a constant stale command at 500 Hz; forges
@@ -61,7 +62,8 @@ def _qos(topic: str) -> Any:
 class Hostile:
     """The rogue or fuzzer node (a plain rclpy node with a standard executor)."""
 
-    def __init__(self, kind: str, name: str, seed: int, sign: bool) -> None:
+    def __init__(self, kind: str, name: str, seed: int, sign: bool, blind: bool = False
+                 ) -> None:
         self.node = rclpy.create_node(name, start_parameter_services=False)
         self.kind = kind
         self.rng = random.Random(seed)
@@ -79,7 +81,9 @@ class Hostile:
         self.genuine: dict[str, deque[bytes]] = {t: deque(maxlen=200) for t in TYPES}
         self.mine: set[bytes] = set()
         self.mine_order: deque[bytes] = deque()
-        self.active = False
+        self.active = blind  # blind: at once, without having seen the graph's states
+        if blind:
+            print("hostile: active", flush=True)
         self.last_state: JointState | None = None
         for t, m in TYPES.items():
             if t != T.CLOCK:
@@ -92,9 +96,12 @@ class Hostile:
         def cb(data: bytes) -> None:
             if data in self.mine:
                 return
+            try:
+                msg = deserialize_message(data, TYPES[topic])  # the trailer is ignored
+            except Exception:  # garbage of its own come back (blind: nothing else comes)
+                return
             self.genuine[topic].append(data)
             if topic == T.JOINT_STATES:
-                msg = deserialize_message(data, JointState)  # the trailer is ignored
                 self.last_state = msg
                 if not self.active:
                     self.active = True
@@ -275,9 +282,12 @@ def main() -> int:
     ap.add_argument("--name", default="")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--sign", action="store_true")
+    ap.add_argument("--blind", action="store_true",
+                    help="act at once, without waiting to see the graph's states")
     args = ap.parse_args()
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    h = Hostile(args.kind, args.name or f"{args.kind}_node", args.seed, args.sign)
+    h = Hostile(args.kind, args.name or f"{args.kind}_node", args.seed, args.sign,
+                args.blind)
     stop = []
     signal.signal(signal.SIGINT, lambda *a: stop.append(1))
     signal.signal(signal.SIGTERM, lambda *a: stop.append(1))

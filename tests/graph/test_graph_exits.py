@@ -62,8 +62,15 @@ class Script:
         self.wait_for(lambda: text in self.log(name), timeout, f"'{text}' in {name}.log")
 
     def pids(self) -> dict[str, int]:
-        self.wait_for(lambda: (self.logs / "pids.json").exists(), 60, "pids.json")
-        return json.loads((self.logs / "pids.json").read_text())
+        """The launcher's node pids, once the sim is among them (the file is written
+        before the sim starts too: the sim reads it)."""
+        def read() -> dict[str, int]:
+            try:
+                return json.loads((self.logs / "pids.json").read_text())
+            except (OSError, ValueError):
+                return {}
+        self.wait_for(lambda: "hexapod_sim" in read(), 60, "pids.json with the sim")
+        return read()
 
     def wait(self, timeout: float = 180) -> int:
         return self.proc.wait(timeout)
@@ -245,6 +252,14 @@ def test_fallback_alone_exits_7(script, tmp_path):
     assert code == EXIT_CODES["fallback"] == 7, s.stderr()
     assert "fallback (exit 7)" in s.stderr() and "node died" not in s.stderr()
     assert_uncommanded_cycles_are_labelled(s, "pd_p")
+    # under joint damping the body sinks through the ground: those cycles are not a walk,
+    # and nothing prints their numbers as indices (walking.py)
+    assert "fallen (exit 8)" in s.stderr()
+    cycles = json.loads((s.bag / "indices.json").read_text())["cycles"]
+    fell = [c for c in cycles if c.get("fallen")]
+    assert fell and all(c["indices"] is None and c["label"] != "pd_p" for c in fell)
+    assert cycles[0]["indices"] is not None and not cycles[0].get("fallen")
+    assert "no indices: fallen: hip height" in table_rows(s.stdout())[-1]
     # the transition a ROS tool made is in the bag: the controller's status says it, at once
     from hexapod_common.core import cdr
     from hexapod_metrics.bag import open_bag

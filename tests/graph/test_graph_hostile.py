@@ -39,17 +39,26 @@ HOSTILE = Path(__file__).with_name("hostile_node.py")
 CONTROLLED = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE, T.JOINT_COMMANDS)
 
 
-def _start_hostile(g, kind: str, tmp_path: Path, sign: bool) -> tuple[subprocess.Popen, Path]:
+def _start_hostile(g, kind: str, tmp_path: Path, sign: bool, outsider: bool = False
+                   ) -> tuple[subprocess.Popen, Path]:
+    """The hostile node: with the graph's environment (its DDS profile, hence the run's
+    partition, as if it had read the partition's name off the discovery traffic; the key
+    only to ``sign``), or as an ``outsider`` without either (acting blind)."""
     out = tmp_path / f"{kind}.json"
     log = open(tmp_path / f"{kind}.log", "wb")
     args = [sys.executable, str(HOSTILE), kind, "--out", str(out), "--name", f"{kind}_node"]
-    proc = subprocess.Popen(args + (["--sign"] if sign else []), env=g.env, stdout=log,
+    env = g.env
+    if outsider:
+        env = {k: v for k, v in env.items()
+               if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "HEXAPOD_KEY_FILE")}
+        args.append("--blind")
+    proc = subprocess.Popen(args + (["--sign"] if sign else []), env=env, stdout=log,
                             stderr=subprocess.STDOUT, start_new_session=True)
     return proc, out
 
 
 def _run(make_graph, tmp_path: Path, kind: str, mode: str, period: float, duration: float,
-         sign: bool = False):
+         sign: bool = False, outsider: bool = False):
     bag = tmp_path / "bag"
     # A long lockstep timeout: on this shared 2-core machine a starved process can take
     # more than the default 0.5 s to answer, which would be a missed tick, not the hostile
@@ -59,7 +68,7 @@ def _run(make_graph, tmp_path: Path, kind: str, mode: str, period: float, durati
     g.start("metrics", f"bag_path:={bag}")
     for node in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
         g.start(node)
-    hostile, out = _start_hostile(g, kind, tmp_path, sign)
+    hostile, out = _start_hostile(g, kind, tmp_path, sign, outsider)
     try:
         # The sim starts once the hostile node is matched too: it acts from tick 0.
         g.start("hexapod_sim", "stop_at_end:=true", f"run.duration:={duration}",
@@ -268,3 +277,25 @@ def test_rogue_node_is_not_at_the_controls_and_is_reported(make_graph, tmp_path,
     for node in ("pd_pf_controller", "trajectory_generator"):
         assert (f"publishers on {T.JOINT_STATES} that are not nodes of this graph: {who}"
                 in logs[node])
+
+
+def test_an_outsiders_flood_of_the_tick_topics_wakes_no_node(make_graph, tmp_path):
+    """The tick topics live in the run's DDS partition (dds_profile.PARTITIONED_TOPICS): a
+    fuzzer on the domain without the run's profile reaches none of the graph's readers of
+    them (nothing to drop, nothing decoded: no wake-up), only the default partition's
+    topics, where it is dropped, counted and named; the run is unchanged."""
+    from hexapod_common.runtime.dds_profile import PARTITIONED_TOPICS
+
+    duration = 3.0
+    bag, logs, sent, report = _run(make_graph, tmp_path, "fuzz", "lockstep", 0.001, duration,
+                                   outsider=True)
+    for topic in CONTROLLED:
+        assert sum(n for k, n in sent.items() if k.startswith(topic + " ")) > 20, topic
+    dropped = report["dropped"]
+    assert not [k for k in dropped if k.split(" ")[0] in PARTITIONED_TOPICS], dropped
+    for topic in (T.ACTIVE_CONTROLLER, T.STATUS, T.PARAMETERS):  # reached, and refused
+        assert dropped.get(f"{topic} ({M.UNAUTHENTICATED})", 0) > 20, dropped
+    _assert_run_unchanged(_read(bag), logs, "lockstep", 0.001, duration)
+    # named where its messages arrive (on the tick topics nothing of it does: rclpy cannot
+    # tell a publisher outside the partition from a controller that joined the graph)
+    assert "/fuzz_node" in report["outside_publishers"][T.STATUS]

@@ -24,7 +24,7 @@ import pytest
 from hexapod_bringup.graph_launcher import EXIT_CODES
 from hexapod_common.core import topics as T
 from hexapod_common.runtime import conversions as C
-from hexapod_common.runtime.dds_profile import private_profile
+from hexapod_common.runtime.dds_profile import partition_of, private_profile
 from hexapod_metrics.bag import open_bag
 
 from .bag_checks import recorded_obs
@@ -36,7 +36,9 @@ CYCLE_S = 1.0  # gait cycle of the base case (s): a segment is scored over its f
 
 #: A controller node written from docs/controllers.md only: the topics, the stamp rule, the
 #: frame_id rule and the trailer (BLAKE2b-128 with the key file's 32 bytes, topic NUL payload
-#: padding sender sequence). UNSIGNED=1: no trailer; ANSWER_ALL=1: it answers every state (a
+#: padding sender sequence). Arguments: the node's name, then the controller's name if it
+#: differs (a node that takes a built-in's place: pd_p_controller serves pd_p).
+#: UNSIGNED=1: no trailer; ANSWER_ALL=1: it answers every state (a
 #: careless node), so its commands reach the sim while another controller is in charge.
 SPEC_NODE = r'''
 import hashlib, os, secrets, struct, sys
@@ -47,6 +49,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 NAME = sys.argv[1]
+CONTROLLER = sys.argv[2] if len(sys.argv) > 2 else NAME
 UNSIGNED = os.environ.get("UNSIGNED") == "1"
 ANSWER_ALL = os.environ.get("ANSWER_ALL") == "1"
 TOPIC = "/hexapod/joint_commands"
@@ -85,7 +88,7 @@ class Spec(Node):
         return (m.header.stamp.sec, m.header.stamp.nanosec)
 
     def on_state(self, m):
-        if m.header.frame_id.split("/")[0] != NAME and not ANSWER_ALL:
+        if m.header.frame_id.split("/")[0] != CONTROLLER and not ANSWER_ALL:
             return
         self.pending = m
         if self.key(m) in self.refs:
@@ -98,7 +101,7 @@ class Spec(Node):
                for j in JOINTS]
         cmd = JointState(name=JOINTS, position=[ref[j][0] for j in JOINTS],
                          velocity=[ref[j][1] for j in JOINTS], effort=eff)
-        cmd.header.stamp, cmd.header.frame_id = m.header.stamp, NAME
+        cmd.header.stamp, cmd.header.frame_id = m.header.stamp, CONTROLLER
         data = serialize_message(cmd)
         self.seq += 1
         self.pub.publish(data if UNSIGNED else sign(data, self.seq))
@@ -154,11 +157,23 @@ def key_file(s: Script) -> str:
     return m.group(2)
 
 
+def profile_file(s: Script) -> str:
+    """The run's Fast DDS profile run_graph.sh prints for nodes that join (it puts the tick
+    topics in the run's partition)."""
+    s.wait_for(lambda: "FASTRTPS_DEFAULT_PROFILES_FILE=" in s.stdout(), 120, "the join line")
+    m = re.search(r"a controller node joins with .* FASTRTPS_DEFAULT_PROFILES_FILE=(\S+)",
+                  s.stdout())
+    assert m, s.stdout()
+    return m.group(1)
+
+
 def start_node(join_script, s: Script, argv: list[str], name: str,
                **env: str) -> subprocess.Popen[bytes]:
-    """A hand-started node on the graph's domain (its output in ``<logs>/<name>.out``)."""
+    """A hand-started node on the graph's domain, with the run's DDS profile unless ``env``
+    names one (its output in ``<logs>/<name>.out``)."""
     full = {**os.environ, "ROS_DOMAIN_ID": str(s.domain),
-            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", **env}
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "FASTRTPS_DEFAULT_PROFILES_FILE": profile_file(s), **env}
     out = open(s.logs / f"{name}.out", "wb")
     p = subprocess.Popen(argv, env=full, stdout=out, stderr=subprocess.STDOUT)
     join_script.nodes.append(p)
@@ -244,7 +259,7 @@ def test_readme_walkthrough_scores_my_controller(join_script):
     st = hexapod_cli(s.domain, "status")
     assert st.returncode == 0, st.stderr
     assert "my_controller (node my_controller, in charge)" in st.stdout, st.stdout
-    assert "pd_p (node pd_p_controller)" in st.stdout, st.stdout
+    assert "pd_p (node pd_p_controller, active)" in st.stdout, st.stdout
     s.wait_for(lambda: sim_time(s) > t0 + 2.2 * CYCLE_S, 180, "two cycles of my_controller")
     assert "switching my_controller -> pd_pf" in switch(s, "pd_pf")
     t1 = switch_tick(s, "my_controller", "pd_pf")
@@ -310,7 +325,9 @@ def test_joined_controller_death_holds_falls_back_and_exits_7(join_script, tmp_p
     # DDS's default 20 s lease the graph would see the killed node leave 20 s later.
     spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",
                       HEXAPOD_KEY_FILE=key,
-                      FASTRTPS_DEFAULT_PROFILES_FILE=str(private_profile(tmp_path)))
+                      FASTRTPS_DEFAULT_PROFILES_FILE=str(private_profile(
+                          tmp_path, partition=partition_of(bytes.fromhex(
+                              Path(key).read_text().strip())))))
     switch(s, "spec_ctl")
     switch_tick(s, "pd_pf", "spec_ctl")
     spec.kill()
@@ -374,6 +391,7 @@ def test_with_authentication_off_an_unsigned_joined_controller_works(join_script
     st = json.loads(hexapod_cli(s.domain, "status", "--json").stdout)["status"]
     assert st["authentication"] == "off" and st["dropped"] == "0", st
     assert stop(s, spec) == 0, s.stderr()
+    assert "authentication: off (HEXAPOD_AUTH=off)" in s.stdout() + s.stderr()  # the summary
     _, segments = analyzed_segments(s)
     assert [g["controller"] for g in segments] == ["pd_pf", "spec_ctl", "pd_pf"], segments
 
@@ -443,7 +461,99 @@ def test_a_lifecycle_controller_that_joins_is_activated_by_switch(join_script, t
     s.wait_for(lambda: sim_time(s) > t0 + 0.02, 60, "ticks of lc_ctl")
     assert "switching lc_ctl -> pd_pf" in switch(s, "pd_pf")
     switch_tick(s, "lc_ctl", "pd_pf")
-    assert stop(s, node) == 0, s.stderr()
+    # lc_ctl commands zero torque: if it stayed in charge for a whole cycle (a loaded
+    # machine), the body sank and that cycle is not a walk (exit 8), rightly
+    code = stop(s, node)
+    assert code == 0 or (code == 8 and "fallen (exit 8)" in s.stderr()), s.stderr()
     frames = commands_by_frame(s.bag)
     assert frames.get("lc_ctl", 0) >= 20, frames
     assert sim_summary(s.log("hexapod_sim"))["switches"] == 2
+
+
+def test_a_joined_controller_in_charge_from_tick_0_records_cleanly_and_analyses(join_script,
+                                                                                  tmp_path):
+    script = tmp_path / "spec_node.py"
+    script.write_text(SPEC_NODE)
+    s = join_script("--duration", "2.2", "--controller", "spec_ctl", "--no-switch")
+    key = key_file(s)
+    s.wait_log("hexapod_sim", "waiting for")
+    spec = start_node(join_script, s, [sys.executable, str(script), "spec_ctl"], "spec_ctl",
+                      HEXAPOD_KEY_FILE=key)
+    code = s.wait(300)
+    spec.send_signal(signal.SIGINT)
+    spec.wait(30)
+    assert code == 0, s.stderr()
+    # the recorder takes the sim's announcement of the controller in charge at tick 0, made
+    # before it may have discovered the joined node
+    assert f"dropped a message on {T.ACTIVE_CONTROLLER}" not in s.log("metrics")
+    with open_bag(s.bag) as b:
+        announced = [(t, C.decode_string(bytes(d))) for _, t, d in
+                     b.messages([T.ACTIVE_CONTROLLER])]
+    assert announced == [(0, "spec_ctl")], announced
+    _, segments = analyzed_segments(s)
+    assert [g["controller"] for g in segments] == ["spec_ctl"], segments
+    assert segments[0]["cycles"] >= 1 and "kp_hip=100000" in segments[0]["controller_params"]
+
+
+def test_a_node_takes_a_builtins_place_under_the_builtins_node_name(join_script, tmp_path):
+    """The naming rule (core/controller_names.py): a node named as a built-in controller
+    (pd_p) serves none, and status and switch say how to take its place; a plain node named
+    pd_p_controller serves pd_p where the launcher started none."""
+    script = tmp_path / "spec_node.py"
+    script.write_text(SPEC_NODE)
+    s = join_script("--duration", "0", "--no-switch", "--no-builtin", "pd_p")
+    key = key_file(s)
+    s.wait_log("hexapod_sim", "lockstep mode")
+    misnamed = start_node(join_script, s, [sys.executable, str(script), "pd_p"], "pd_p",
+                          HEXAPOD_KEY_FILE=key)
+    hint = ("node pd_p serves no controller: pd_p is a built-in controller's name, served by "
+            "the node pd_p_controller")
+
+    def status() -> str:
+        r = hexapod_cli(s.domain, "status")
+        assert r.returncode == 0, r.stderr
+        return r.stdout
+    s.wait_for(lambda: hint in status(), 60, "status naming the misnamed node")
+    assert "controllers: pd_pf (node pd_pf_controller, active, in charge)\n" in status()
+    r = hexapod_cli(s.domain, "switch", "pd_p")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r
+    assert "no controller node pd_p_controller on ROS_DOMAIN_ID=" in r.stderr, r.stderr
+    assert hint in r.stderr, r.stderr
+    misnamed.send_signal(signal.SIGINT)
+    misnamed.wait(30)
+
+    # a plain node in pd_p's place: switched to as any plain node (no lifecycle to ask)
+    spec = start_node(join_script, s, [sys.executable, str(script), "pd_p_controller", "pd_p"],
+                      "pd_p_controller", HEXAPOD_KEY_FILE=key)
+    run_segment(s, "pd_p", cycles=1.2)
+    assert stop(s, spec) == 0, s.stderr()
+    frames = commands_by_frame(s.bag)
+    assert frames.get("pd_p", 0) >= 1000, frames
+    _, segments = analyzed_segments(s)
+    assert [g["controller"] for g in segments] == ["pd_pf", "pd_p", "pd_pf"], segments
+    # its own parameters, not the built-in's, read from the node at the switch
+    assert "kp_hip=100000" in segments[1]["controller_params"], segments
+
+
+def test_an_unsigned_controller_in_charge_is_named_outside_the_graph(join_script, tmp_path):
+    """Switched to, an unsigned node's commands are dropped: it is not vouched for as a node
+    of the graph (it was, by being in charge), so status and the summary name it."""
+    script = tmp_path / "spec_node.py"
+    script.write_text(SPEC_NODE)
+    s = join_script("--duration", "0", "--no-switch", "--no-builtin", "pd_p",
+                    lockstep_timeout=1.0)
+    key_file(s)
+    s.wait_log("hexapod_sim", "lockstep mode")
+    rogue = start_node(join_script, s, [sys.executable, str(script), "unsigned_ctl"],
+                       "unsigned_ctl", UNSIGNED="1", HEXAPOD_KEY_FILE="")
+    switch(s, "unsigned_ctl")
+    s.wait_log("hexapod_sim", f"dropped a message on {T.JOINT_COMMANDS}: unauthenticated")
+
+    def named() -> bool:
+        r = hexapod_cli(s.domain, "status")
+        return f"publishers outside the graph: {T.JOINT_COMMANDS}: /unsigned_ctl" in r.stdout
+    s.wait_for(named, 60, "status naming the unsigned controller")
+    code = stop(s, rogue)
+    assert code == EXIT_CODES["fallback"], (code, s.stderr())
+    summary = [ln for ln in s.log("hexapod_sim").splitlines() if "stopped at tick" in ln]
+    assert "/unsigned_ctl" in summary[0].split("publishers outside the graph:")[1], summary

@@ -1,6 +1,8 @@
 """`hexapod switch` hands control over at a tick boundary without losing a tick."""
 from __future__ import annotations
 
+import signal
+import subprocess
 import time
 
 import numpy as np
@@ -128,3 +130,83 @@ def test_switch_loses_no_tick_and_lands_in_the_bag(make_graph, tmp_path, mode, p
     assert announced == ["pd_pf", "pd_p"]
     assert f"switched pd_pf -> pd_p at tick {switch} " in g.log("hexapod_sim")
     assert np.isfinite(switch)
+
+
+def _refused(r: subprocess.CompletedProcess) -> str:
+    """The one line of a refused `hexapod switch` (non-zero exit, nothing on stdout)."""
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode != 0 and not r.stdout.strip() and len(lines) == 1, (r.returncode,
+                                                                          r.stdout, r.stderr)
+    return lines[0]
+
+
+def test_switch_refuses_a_node_name_and_a_controller_in_charge_that_has_left(make_graph,
+                                                                            tmp_path):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    from .test_graph_join import EXAMPLE
+
+    # A joined controller (the example package's node) in charge from tick 0, PD-P&F beside
+    # it; a command missed after 0.2 s, so that the sim soon sees the joined node gone.
+    g = make_graph(overrides=("sim.lockstep_timeout:=0.2",))
+    g.start("trajectory_generator")
+    g.start("pd_pf_controller")
+    out = open(tmp_path / "my_controller.out", "wb")
+    node = subprocess.Popen([str(EXAMPLE)], env=g.env, stdout=out, stderr=subprocess.STDOUT)
+    try:
+        g.start("hexapod_sim", "run.controller:=my_controller",
+                "wait_for:=trajectory_generator,pd_pf_controller,my_controller")
+        g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+        # the node's name for its controller's: no command would ever come
+        line = _refused(hexapod_cli(g.domain_id, "switch", "pd_pf_controller"))
+        assert "pd_pf_controller is the node of controller pd_pf (use pd_pf)" in line, line
+    finally:
+        node.send_signal(signal.SIGINT)  # leaves the graph (a goodbye: seen at once)
+        node.wait(30)
+    g.wait_log("hexapod_sim", "my_controller (node my_controller) has left the graph",
+               timeout=60)
+    line = _refused(hexapod_cli(g.domain_id, "switch", "my_controller"))
+    assert "no controller node my_controller on ROS_DOMAIN_ID=" in line, line
+    assert "though my_controller is in charge" in line and "already in charge" not in line
+    with ros_client(g.domain_id) as client:  # `ros2 param set` on the sim: the same check
+        value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="my_controller")
+        req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
+        r = call(client, SetParameters, "/hexapod_sim/set_parameters", req).results[0]
+    assert not r.successful and "no controller node my_controller" in r.reason, r.reason
+    assert "switch to pd_pf_controller" not in g.log("hexapod_sim")
+    assert g.procs["hexapod_sim"].poll() is None
+
+
+def test_status_shows_each_controller_nodes_lifecycle_state(make_graph):
+    import json
+
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    g = make_graph()
+    for n in ("trajectory_generator", "pd_p_controller", "pd_pf_controller"):
+        g.start(n)
+    g.start("hexapod_sim", "wait_for:=trajectory_generator,pd_p_controller,pd_pf_controller")
+    g.wait_log("hexapod_sim", "lockstep mode", timeout=120)
+
+    def controllers_line() -> str:
+        r = hexapod_cli(g.domain_id, "status", "--timeout", "60")
+        assert r.returncode == 0, r.stderr
+        return next(line for line in r.stdout.splitlines() if line.startswith("controllers: "))
+
+    assert controllers_line() == ("controllers: pd_p (node pd_p_controller, active), "
+                                  "pd_pf (node pd_pf_controller, active, in charge)")
+    with ros_client(g.domain_id) as client:
+        for transition, state in ((Transition.TRANSITION_DEACTIVATE, "inactive"),
+                                  (Transition.TRANSITION_CLEANUP, "unconfigured")):
+            req = ChangeState.Request()
+            req.transition.id = transition
+            assert call(client, ChangeState, "/pd_p_controller/change_state", req).success
+            # a node stays a controller node (it keeps its command publisher) in any state
+            assert controllers_line() == (f"controllers: pd_p (node pd_p_controller, {state}), "
+                                          f"pd_pf (node pd_pf_controller, active, in charge)")
+    r = hexapod_cli(g.domain_id, "status", "--json", "--timeout", "60")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["status"]["controller_states"] == (
+        "pd_p_controller=unconfigured,pd_pf_controller=active")

@@ -10,7 +10,7 @@ import argparse
 import importlib
 import json
 import sys
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 from hexapod_common.core.errors import HexapodError
 
@@ -18,10 +18,10 @@ from .cli_args import OneLineParser, param_value, params_arguments, params_from_
 
 #: Modules that contribute subcommands (``add_parser(subparsers)``); missing ones are skipped
 #: so that a partial install still offers what it has.
-COMMAND_MODULES = ("hexapod_bringup.cmd_graph", "hexapod_bringup.cmd_experiments",
+COMMAND_MODULES = ("hexapod_bringup.graph_cli", "hexapod_bringup.cmd_experiments",
                    "hexapod_bringup.cmd_analyze", "hexapod_bringup.animation",
                    "hexapod_bringup.cmd_controllers", "hexapod_bringup.cmd_montecarlo")
-#: Subcommands that talk to a running graph: parsed and run by cmd_graph alone, without
+#: Subcommands that talk to a running graph: parsed and run by graph_cli alone, without
 #: importing the engine, numba and the plots (a second of CPU that a realtime graph on the
 #: same cores would feel).
 GRAPH_COMMANDS = ("switch", "status")
@@ -68,12 +68,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             write_run_bag(sim.run, f"{args.bag}_{c}" if len(controllers) > 1 else args.bag)
         results[c] = sim
     if args.json:
-        doc = {c: {"status": s.outcome.status, "window_s": list(s.outcome.window),
+        doc = {c: {"status": s.outcome.status, "reason": s.outcome.reason,
+                   "window_s": list(s.outcome.window),
                    "t_max": p.actuator.t_max, "ground_scale": p.ground.scale,
-                   "indices": s.indices.as_dict() if s.indices else None}
+                   "indices": s.indices.as_dict() if s.indices else None,
+                   "cycles": [{"cycle": k, "t_a": k * p.cycle_time,
+                               "t_b": (k + 1) * p.cycle_time,
+                               **(i.as_dict() if i else {"status": "fallen"})}
+                              for k, i in enumerate(s.outcome.cycles)]}
                for c, s in results.items()}
         print(json.dumps(doc, indent=2, allow_nan=True))
-        return 0
+        return _simulate_exit(results)
     print(f"T_max = {p.actuator.t_max:g} N m, ground = {100 * p.ground.scale:g} %, "
           f"window = [{results[controllers[0]].outcome.window[0]:g}, "
           f"{results[controllers[0]].outcome.window[1]:g}] s")
@@ -94,9 +99,21 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         row = f"{name:<8} {INDEX_UNITS[name]:<12}"
         for c in controllers:
             idx = results[c].indices
-            row += f"{_fmt(getattr(idx, name)) if idx else 'diverged':>14}"
+            row += f"{_fmt(getattr(idx, name)) if idx else results[c].outcome.status:>14}"
         print(row)
-    return 0
+    for c in controllers:
+        if results[c].outcome.reason:
+            print(f"{c}: {results[c].outcome.reason}")
+    return _simulate_exit(results)
+
+
+#: Exit code of ``hexapod simulate`` when a run was not a walk (graph_launcher's "fallen").
+EXIT_FALLEN = 8
+
+
+def _simulate_exit(results: dict[str, Any]) -> int:
+    """0, or :data:`EXIT_FALLEN` if any run's evaluation window was not a walk."""
+    return EXIT_FALLEN if any(s.outcome.status == "fallen" for s in results.values()) else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -111,7 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "the params file)")
     sp.add_argument("--duration", type=param_value("run.duration"),
                     help="simulated seconds (default run.duration)")
-    sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    sp.add_argument("--json", action="store_true", help="print JSON instead of a table "
+                    "(the window's indices and every full gait cycle's)")
     sp.add_argument("--bag", help="also write the run as a rosbag2/MCAP bag to this directory")
     sp.add_argument("--switch", action="append", default=[], metavar="TIME:CONTROLLER",
                     help="hand over to CONTROLLER at TIME s (repeatable), as the graph does")
@@ -134,7 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: run a subcommand; project errors become one line and exit code 2."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in GRAPH_COMMANDS:
-        from .cmd_graph import main as graph_main
+        from .graph_cli import main as graph_main
 
         return graph_main(argv)
     import numpy as np

@@ -6,7 +6,7 @@ launcher (`scripts/run_graph.sh`), so both accept and refuse the same input in t
 * :func:`param_value`: an option that sets one model parameter: the text is read as a number
   (``1e6``, ``inf``/``.inf``) and checked against that parameter's spec; the error names the
   option and the parameter (``argument --t-max: parameter 'actuator.t_max' = 'abc' is
-  invalid: allowed float in (0, inf]``).
+  invalid: allowed float in (0, inf] (a string, where a float is expected)``).
 * :func:`number`: a plain finite number within bounds (``--switch-at``, ``--timeout``).
 * :func:`value_range`: ``a:b:n`` (log-spaced), ``a:b:n:lin`` or a comma list, validated.
 * :func:`params_arguments` / :func:`params_from_args`: the params-file options every engine
@@ -17,12 +17,23 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Any, Callable, NoReturn
-
-import yaml
+from typing import TYPE_CHECKING, Any, Callable, NoReturn
 
 from hexapod_common.core.errors import HexapodError, ParameterError
-from hexapod_common.core.params import SPECS, HexapodParams, check_value, load_params, parse_yaml
+
+if TYPE_CHECKING:
+    from hexapod_common.core.params import HexapodParams
+
+# The parameter table (core/params.py: PyYAML, the controllers' entry points) is imported
+# where it is used, not here: `hexapod switch` and `hexapod status` parse their options
+# with this module and must start in a fraction of a second.
+
+
+def read_number(text: str) -> float:
+    """A number written as text, read as the params file reads it (params.read_number)."""
+    from hexapod_common.core.params import read_number as read
+
+    return read(text)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -35,22 +46,10 @@ class OneLineParser(argparse.ArgumentParser):
         sys.exit(2)
 
 
-def read_number(text: str) -> float:
-    """A number from the command line, read like the params file reads it (``1e6``,
-    ``.inf``, ``inf``); raises ValueError if it is not one."""
-    try:
-        value = parse_yaml(text) if text.strip() else None
-    except yaml.YAMLError:
-        raise ValueError(text) from None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        if text.strip().lower() in ("inf", "+inf", "-inf", "nan"):
-            return float(text)
-        raise ValueError(text)
-    return float(value)
-
-
 def param_value(name: str) -> Callable[[str], Any]:
     """An argparse ``type`` for an option that sets parameter ``name`` (checked by its spec)."""
+    from hexapod_common.core.params import SPECS, check_value, wrong_type
+
     spec = SPECS[name]
 
     def convert(text: str) -> Any:
@@ -60,8 +59,7 @@ def param_value(name: str) -> Callable[[str], Any]:
             try:
                 value = read_number(text)
             except ValueError:
-                raise argparse.ArgumentTypeError(
-                    str(ParameterError(name, text, spec.allowed()))) from None
+                raise argparse.ArgumentTypeError(str(wrong_type(name, spec, text))) from None
         try:
             return check_value(name, value)
         except ParameterError as err:
@@ -180,11 +178,15 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 def params_from_args(args: argparse.Namespace) -> HexapodParams:
     """Load the params file and apply --t-max, --ground-scale and --set overrides."""
+    from hexapod_common.core.params import load_params
+
     return load_params(args.params, **overrides_from_args(args))
 
 
 def parse_value(text: str) -> Any:
     """A --set/--change value: YAML (numbers, booleans, lists), else the text itself."""
+    from hexapod_common.core.params import parse_yaml
+
     try:
         return parse_yaml(text)
     except Exception:  # noqa: BLE001 (any YAML error: then it is text)
@@ -198,9 +200,9 @@ __all__ = ["OneLineParser", "control_rate", "number", "overrides_from_args", "pa
 
 def print_tuning(res: Any) -> None:
     """The best gain set of a tuning (grid or CMA-ES) next to the params file's, with
-    eps_xH + eps_yH of each and the improvement."""
+    trk_xH + eps_yH of each and the improvement."""
     print("best:        " + ", ".join(f"{k}={v:.6g}" for k, v in res.best.items()) +
-          f"  eps_xH+eps_yH = {res.best_score:.5g} m")
+          f"  trk_xH+eps_yH = {res.best_score:.5g} m")
     print("params file: " + ", ".join(f"{k}={v:.6g}" for k, v in res.reference.items()) +
-          f"  eps_xH+eps_yH = {res.reference_score:.5g} m")
+          f"  trk_xH+eps_yH = {res.reference_score:.5g} m")
     print(f"the best set beats the params file's gains by {100 * res.improvement:.3g} %")

@@ -10,7 +10,15 @@ from pathlib import Path
 
 from hexapod_metrics.bag import reindex
 from hexapod_metrics.core.analysis import BagAnalysis, SegmentResult, analyze_bag
-from hexapod_metrics.core.indices import INDEX_NAMES, REPORTED_NAMES, Indices, lag_growth
+from hexapod_metrics.core.indices import (DRIFT_NAMES, INDEX_NAMES, REPORTED_NAMES, Indices,
+                                         lag_growth)
+
+#: Exit code of ``hexapod analyze`` when a segment had a cycle that was not a walk.
+EXIT_FALLEN = 8
+
+
+#: The columns of the per-cycle table: the seven, the hip lag and the drift indices.
+CYCLE_COLUMNS = INDEX_NAMES + ("lag_xH",) + DRIFT_NAMES
 
 
 def _fmt(idx: Indices | None, name: str) -> str:
@@ -70,20 +78,24 @@ def _print(analyses: list[BagAnalysis], per_cycle: bool) -> None:
     print(f"\n{'segment':<8}" + "".join(f"{h:>{width}}" for h in heads))
     print(f"{'cycles':<8}" + "".join(f"{s.cycles:>{width}}" for _, s in cols))
     for n in REPORTED_NAMES:
-        print(f"{n:<8}" + "".join(f"{_fmt(s.indices, n):>{width}}" for _, s in cols))
+        print(f"{n:<8}" + "".join(f"{'fallen' if s.fallen else _fmt(s.indices, n):>{width}}"
+                                  for _, s in cols))
+    for _, s in cols:
+        if s.fallen:
+            print(f"{s.controller} [{s.t_start:g}-{s.t_end:g}s]: no indices, {s.fallen}")
     if per_cycle:
         for a in analyses:
             print(f"\n{a.path.name}: per gait cycle")
             print(f"{'cycle':>5} {'t_a':>7} {'controller':>10} " +
-                  " ".join(f"{n:>10}" for n in INDEX_NAMES + ("lag_xH",)) +
+                  " ".join(f"{n:>10}" for n in CYCLE_COLUMNS) +
                   f" {'lag growth':>10}")
             prev = None
             for c in a.cycles:
                 idx = c.indices
                 growth = lag_growth(prev.indices, idx) if prev is not None and \
                     prev.cycle == c.cycle - 1 else math.nan
-                vals = (" ".join(f"{_fmt(idx, n):>10}" for n in INDEX_NAMES + ("lag_xH",))
-                        + f" {growth:>10.3g}" if idx else
+                vals = (" ".join(f"{_fmt(idx, n):>10}" for n in CYCLE_COLUMNS)
+                        + f" {growth:>10.3g}" if idx else c.fallen if c.fallen else
                         f"incomplete: {c.missing} ticks missing")
                 print(f"{c.cycle:>5} {c.t_a:>7.3g} {c.controller:>10} {vals}")
                 prev = c
@@ -171,6 +183,8 @@ def _cmd_analyze(args: argparse.Namespace) -> int:
         paths = _plots(analyses, out)
         print("plots: " + ", ".join(str(p) for p in paths))
     print(f"analysis written to {out}")
+    if any(s.fallen for a in analyses for s in a.segments):
+        return EXIT_FALLEN  # said above, per segment
     return 0
 
 

@@ -216,11 +216,27 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     p = params_from_args(args)
     plan = Plan.quick() if args.quick else Plan()
     print(f"writing the report into {Path(args.out).resolve()}", flush=True)
+    readme = Path(args.readme) if args.readme else None
+    if readme is not None:
+        from .report_headline import BEGIN
+
+        if not readme.is_file() or BEGIN not in readme.read_text():
+            raise HexapodError(f"argument --readme: {readme} is not a file with the headline "
+                               f"marker {BEGIN}")
     verdicts = reproduce(p, Path(args.out), _backend(args), plan,
                          progress_factory(not args.no_progress))
+    if readme is not None:
+        from .report_headline import write_readme
+
+        doc = json.loads((Path(args.out) / "results.json").read_text())
+        write_readme(readme, doc["claims"])
+        print(f"headline written into {readme}")
     for v in verdicts:
         print(f"{v.claim} {v.status.upper()}: {v.statement}")
         print(f"    {v.evidence}")
+        if v.windows:
+            print(f"    every window, paper's indices: {v.windows}")
+            print(f"    every window, stationary indices: {v.stationary}")
     print(f"report written to {Path(args.out) / 'README.md'}")
     return 0
 
@@ -273,11 +289,14 @@ COMMANDS: tuple[tuple[str, str, Callable[[argparse.Namespace], int], tuple[_Opt,
         _opt("--grid", action="append", default=[], metavar="GAIN=VALUES",
              help="explicit values for one gain, e.g. kp1=5000:160000:16"),
         _opt("--json", help="write every evaluated set to this JSON file"))),
-    ("reproduce", "run E1-E6, check every point in dt, write the report", _cmd_reproduce, (
+    ("reproduce", "run E1-E9, check every point in dt, write the report", _cmd_reproduce, (
         _opt("--out", default="report", help="report directory (default ./report: from the "
              "repository's root this regenerates the committed report; printed at the start)"),
         _opt("--quick", action="store_true",
-             help="a few points per experiment (every point still checked in dt)"))),
+             help="a few points per experiment (every point still checked in dt)"),
+        _opt("--readme", metavar="FILE", default=None,
+             help="also write the claims' headline table between the headline markers of "
+             "FILE (the repository's README.md)"))),
 )
 
 

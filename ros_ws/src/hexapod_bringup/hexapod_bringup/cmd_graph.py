@@ -1,14 +1,4 @@
-"""`hexapod switch` and `hexapod status`, and a small launcher for the node graph.
-
-* ``hexapod switch NAME``: any controller on the graph (docs/controllers.md: node
-  ``<name>_controller`` for the engine's controllers, else the node ``NAME``); a lifecycle
-  controller node is made active first (configured and activated through its
-  ``change_state`` service if needed), a plain node must be running; then it sets
-  ``run.controller`` on ``/hexapod_sim`` through the standard ``set_parameters`` service;
-  the sim hands over at the next tick boundary. One line on success; a one-line error and
-  exit code 2 if the sim or the controller does not answer within ``--timeout``.
-* ``hexapod status``: waits for one ``/hexapod/status`` message and prints the nodes seen
-  in the graph, the mode, simulated time, controller in charge, missed and late ticks.
+"""The node graph's process launcher: :class:`GraphProcesses`.
 
 :class:`GraphProcesses` starts node processes (forked from a fork server that imported the
 node modules once, node_fork.py, or ``python -c 'from <module> import main'``; both with
@@ -25,7 +15,6 @@ those ports (dds_profile.PortFence).
 """
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import signal
@@ -35,20 +24,16 @@ import tempfile
 import time
 import weakref
 from pathlib import Path
-from typing import IO, Any, Callable, Sequence
+from typing import IO, Callable, Sequence
 
-from hexapod_common.core.errors import HexapodError
-from hexapod_common.core.controller_names import engine_names, name_of, node_of
-from hexapod_common.runtime.dds_profile import (LEASE_S, RESTART_PARTICIPANT_IDS,
-                                                TOOL_PARTICIPANT_IDS, PortFence,
+from hexapod_common.runtime.dds_profile import (LEASE_S, RESTART_PARTICIPANT_IDS, PortFence,
                                                 domain_id_from_env, shm_locks,
                                                 private_profile, remove_dead_shm,
-                                                unused_participant_id)
+                                                run_partition, unused_participant_id)
 from hexapod_common.runtime import node_fork
 from hexapod_common.runtime.lifeline import PARENT_ENV
 
-from .join_options import controller_arg
-from .cli_args import OneLineParser, number
+from .graph_cli import GraphError
 
 #: node name -> (module, entry point)
 NODES: dict[str, tuple[str, str]] = {
@@ -102,16 +87,6 @@ RESTART_PAUSE = LEASE_S + 0.5
 LOCKS_REFRESH = 2.0
 
 
-#: Wall s `hexapod status` gives DDS discovery to find every node of the graph.
-DISCOVERY_TIME = 1.5
-#: ``--timeout`` of ``switch`` and ``status``: seconds, finite and positive.
-TIMEOUT = number(0.0, 3600.0, "a timeout (s)", lo_open=True)
-
-
-class GraphError(HexapodError):
-    """The graph (or one of its nodes) is not there or does not answer."""
-
-
 # --------------------------------------------------------------------------- launcher
 
 
@@ -155,7 +130,8 @@ class GraphProcesses:
         if (self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
                 and "FASTRTPS_DEFAULT_PROFILES_FILE" not in self.env):
             self._private = Path(tempfile.mkdtemp(prefix="hexapod_graph_"))
-            self.env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(self._private))
+            self.env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(
+                self._private, partition=run_partition(self.env)))
             weakref.finalize(self, shutil.rmtree, self._private, True)
             # Ports of this domain that a node killed in an earlier run left (full: a
             # process that took such an id would hear nothing): gone before anyone does.
@@ -209,7 +185,8 @@ class GraphProcesses:
             if participant is not None:
                 self._restart_ids = range(participant + 1, self._restart_ids.stop)
                 env = {**env, "FASTRTPS_DEFAULT_PROFILES_FILE":
-                       str(private_profile(self._private, participant_id=participant))}
+                       str(private_profile(self._private, participant_id=participant,
+                                           partition=run_partition(env)))}
         self._started.add(name)
         log = open(self.log_dir / f"{name}.log", "ab")
         self._logs[name] = log
@@ -336,263 +313,5 @@ class GraphProcesses:
         return codes
 
 
-# --------------------------------------------------------------------------- ROS helpers
-
-
-def _ros_node(name: str) -> Any:
-    import rclpy
-    from rclpy.node import Node
-
-    from hexapod_common.runtime.hot_loop import configure_middleware
-
-    configure_middleware(TOOL_PARTICIPANT_IDS)  # not a just-killed node's participant id
-    rclpy.init(args=[])
-    return Node(f"{name}_{os.getpid()}", start_parameter_services=False)
-
-
-def _call(node: Any, srv_type: Any, service: str, request: Any, timeout: float,
-          missing: str) -> Any:
-    import rclpy
-
-    client = node.create_client(srv_type, service)
-    if not client.wait_for_service(timeout_sec=timeout):
-        raise GraphError(missing)
-    future = client.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
-    if not future.done() or future.result() is None:
-        raise GraphError(f"{service} did not answer within {timeout:g} s")
-    return future.result()
-
-
-def _domain() -> str:
-    return os.environ.get("ROS_DOMAIN_ID", "0")
-
-
-def ensure_active(node: Any, controller: str, timeout: float) -> str:
-    """Configure and activate ``<controller>_controller`` if needed; its state before."""
-    from lifecycle_msgs.msg import State, Transition
-    from lifecycle_msgs.srv import ChangeState, GetState
-
-    name = node_of(controller)
-    missing = (f"controller node {name} is not running on ROS_DOMAIN_ID={_domain()} "
-               f"(no /{name}/get_state within {timeout:g} s): start it first")
-    state = _call(node, GetState, f"/{name}/get_state", GetState.Request(), timeout,
-                  missing).current_state
-    before = state.label
-    steps = {State.PRIMARY_STATE_UNCONFIGURED: [Transition.TRANSITION_CONFIGURE,
-                                                 Transition.TRANSITION_ACTIVATE],
-             State.PRIMARY_STATE_INACTIVE: [Transition.TRANSITION_ACTIVATE],
-             State.PRIMARY_STATE_ACTIVE: []}
-    if state.id not in steps:
-        raise GraphError(f"{name} is in lifecycle state '{state.label}': cannot activate it")
-    for transition in steps[state.id]:
-        req = ChangeState.Request()
-        req.transition.id = transition
-        ok = _call(node, ChangeState, f"/{name}/change_state", req, timeout, missing).success
-        if not ok:
-            raise GraphError(f"{name} refused lifecycle transition {transition}")
-    return before
-
-
-def _is_lifecycle(node: Any, controller: str, timeout: float) -> bool:
-    """Whether ``controller`` is served by a lifecycle node (an engine controller, or a node
-    with a ``get_state`` service); a plain node is switched to as it is.
-
-    Waits up to ``timeout`` for this process to discover the node, then up to 2 s for its
-    services (they are announced one by one; ``get_state`` may come after the others)."""
-    if controller in engine_names():
-        return True
-    target = node_of(controller)
-    end = time.monotonic() + timeout
-    services_by: float | None = None
-    while time.monotonic() < end:
-        if target in node.get_node_names():
-            services_by = services_by or time.monotonic() + 2.0
-            try:
-                services = node.get_service_names_and_types_by_node(target, "/")
-            except Exception:  # noqa: BLE001 - gone meanwhile
-                return False
-            if any(name == f"/{target}/get_state" for name, _ in services):
-                return True
-            if time.monotonic() > services_by:
-                return False
-        time.sleep(0.05)
-    return False
-
-
-
-def switch(controller: str, timeout: float = 10.0) -> str:
-    """Hand control to ``controller`` (see module docstring); the line to print.
-
-    First through the sim's local switch channel (``hexapod_common.core.switch_channel``: no
-    ROS context, no discovery, milliseconds); through ROS services if no sim listens there
-    or the controller must first be configured and activated."""
-    from hexapod_common.core.switch_channel import ChannelError, request
-
-    try:
-        answer = request(f"switch {controller}", _domain(), timeout)
-    except ChannelError as err:
-        raise GraphError(str(err)) from err
-    # The sim already told a lifecycle node that is not active apart from a plain node:
-    # this process's own discovery of the node's services may take longer than the sim's.
-    known_lifecycle = False
-    if answer is not None:
-        status, _, text = answer.partition(" ")
-        if status == "ok":
-            return text
-        if not text.endswith("not active"):
-            raise GraphError(text)
-        known_lifecycle = True
-    import rclpy
-    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-    from rcl_interfaces.srv import GetParameters, SetParameters
-
-    node = _ros_node("hexapod_switch")
-    try:
-        missing = (f"no hexapod_sim running on ROS_DOMAIN_ID={_domain()} "
-                   f"(no /hexapod_sim/set_parameters within {timeout:g} s)")
-        current = _call(node, GetParameters, "/hexapod_sim/get_parameters",
-                        GetParameters.Request(names=["run.controller"]), timeout,
-                        missing).values[0].string_value
-        before = (ensure_active(node, controller, timeout)
-                  if known_lifecycle or _is_lifecycle(node, controller, timeout)
-                  else "active")
-        value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=controller)
-        req = SetParameters.Request(parameters=[Parameter(name="run.controller", value=value)])
-        end = time.monotonic() + timeout
-        while True:  # a just-activated controller takes a moment to show in the sim's graph
-            result = _call(node, SetParameters, "/hexapod_sim/set_parameters", req, timeout,
-                           missing).results[0]
-            if result.successful or " refused: " not in result.reason \
-                    or time.monotonic() > end:
-                break
-            time.sleep(0.05)
-        if not result.successful:
-            raise GraphError(f"hexapod_sim refused run.controller = {controller}: "
-                             f"{result.reason}")
-        activated = ("" if before == "active"
-                     else f"; {node_of(controller)} was {before}, now active")
-        if current == controller:
-            return f"{controller} already in charge{activated}"
-        return f"switching {current} -> {controller} at the next tick{activated}"
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-
-
-def status(timeout: float = 5.0) -> tuple[list[str], dict[str, str] | None]:
-    """Nodes seen in the graph and the values of one /hexapod/status (None if none came)."""
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from hexapod_common.runtime.conversions import statuses
-    from hexapod_common.core.topics import STATUS
-
-    node = _ros_node("hexapod_status")
-    got: list[DiagnosticArray] = []
-    try:
-        # Every node of the graph publishes its status there: keep the sim's.
-        node.create_subscription(DiagnosticArray, STATUS, lambda m: got.extend(
-            [m] if any(s.name == "hexapod_sim" for s in m.status) else []), 10)
-        start = time.monotonic()
-        end = start + timeout
-        # until a status came and discovery had DISCOVERY_TIME s to find every node (a node
-        # that joined is seen later than the status of the sim that answers at once)
-        while (not got or time.monotonic() < start + min(DISCOVERY_TIME, timeout)) \
-                and time.monotonic() < end:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        # This process discovers the graph node by node: the status came once the sim was
-        # seen, the others may not be yet. The sim's status names what it sees.
-        ours = set(node.get_node_names())
-        from hexapod_common.runtime.controller_graph import controller_nodes
-
-        controllers = controller_nodes(node)
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    sim = [s for s in statuses(got[-1]) if s.name == "hexapod_sim"] if got else []
-    values = dict(sim[0].values) if sim else {}
-    theirs = {n for n in values.get("nodes", "").split(",") if n}
-    nodes = sorted(n for n in ours | theirs
-                   if not n.startswith(("hexapod_status_", "_")))
-    if not sim:
-        return nodes, None
-    # the sim's view (it has long discovered every node) and this tool's
-    seen = set(controllers) | set(filter(None, values.get("controller_nodes", "").split(",")))
-    nodes = sorted(set(nodes) | seen)
-    return nodes, values | {"level": sim[0].level, "message": sim[0].message,
-                            "controller_nodes": ",".join(sorted(seen))}
-
-
-# --------------------------------------------------------------------------- commands
-
-
-def _cmd_switch(args: argparse.Namespace) -> int:
-    print(switch(args.controller, args.timeout))
-    return 0
-
-
-def _cmd_status(args: argparse.Namespace) -> int:
-    nodes, st = status(args.timeout)
-    if st is None:
-        seen = ", ".join(nodes) if nodes else "no nodes"
-        print(f"hexapod status: nothing runs on ROS_DOMAIN_ID={_domain()}: no /hexapod/status "
-              f"within {args.timeout:g} s ({seen} seen)", file=sys.stderr)
-        return 1
-    if args.json:
-        import json
-
-        print(json.dumps({"nodes": nodes, "status": st}, indent=1))
-        return 0
-    print(f"nodes: {', '.join(nodes)}")
-    print("controllers: " + (", ".join(
-        f"{name_of(n)} (node {n}{', in charge' if name_of(n) == st['controller'] else ''})"
-        for n in st.get("controller_nodes", "").split(",") if n) or "none on the graph"))
-    end = st.get("end_tick", "none")
-    until = f" of {end}" if end not in ("none", "") else "; runs until stopped"
-    print(f"{st['mode']} mode, sim time {float(st['sim_time']):.3f} s (tick {st['tick']}"
-          f"{until}), "
-          f"controller {st['controller']}, missed {st['missed_ticks']}, late {st['late_ticks']},"
-          f" fallback {st['fallback']}, real-time factor {st['real_time_factor']}: "
-          + (st["message"] if st["level"] == "ok" else f"{st['level'].upper()}: {st['message']}"))
-    return 0
-
-
-def add_parser(subparsers: Any) -> None:
-    """Register ``switch`` and ``status`` with the ``hexapod`` CLI."""
-    sp = subparsers.add_parser("switch", help="hand control to another controller node")
-    sp.add_argument("controller", type=controller_arg,
-                    help="a controller on the graph: pd_p, pd_pf or a node that joined "
-                         "(docs/controllers.md)")
-    sp.add_argument("--timeout", type=TIMEOUT, default=10.0,
-                    help="seconds to wait for the sim and the controller (default 10)")
-    sp.set_defaults(func=_cmd_switch)
-    st = subparsers.add_parser("status", help="what runs in the graph, mode, ticks")
-    st.add_argument("--timeout", type=TIMEOUT, default=5.0,
-                    help="seconds to wait for /hexapod/status (default 5)")
-    st.add_argument("--json", action="store_true", help="print JSON")
-    st.set_defaults(func=_cmd_status)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m hexapod_bringup.cmd_graph switch|status ...``: the same subcommands as
-    ``hexapod``, without importing the rest of the CLI (the engine, numba, plots: seconds),
-    for scripts/switch_controller.sh. Errors are one line and exit code 2, as in ``hexapod``."""
-    parser = OneLineParser(prog="hexapod")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except (HexapodError, OSError) as err:
-        print(f"hexapod {args.command}: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"hexapod {args.command}: interrupted", file=sys.stderr)
-        return 130
-
-
-__all__ = ["GraphError", "GraphProcesses", "NODES", "SIM_TIME_NODES", "add_parser",
-           "ensure_active", "main", "status", "switch"]
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+__all__ = ["GraphError", "GraphProcesses", "NODES", "PRELOAD", "RT_NODES", "RT_PRIORITY_NODES",
+           "SIM_TIME_NODES"]

@@ -11,7 +11,7 @@ each controller's paired difference to the first (paired t on per-seed differenc
 JSON (--json FILE) holds every run with the factors its feet used; ``--seeds 1
 --first-seed K`` with the same options replays seed K bit for bit. With several grounds,
 spreads or T_max values (E8) it prints per point who has the lower hip errors
-(eps_xH + eps_yH) by the paired interval, and how many seeds that took or would take.
+(trk_xH + eps_yH) by the paired interval, and how many seeds that took or would take.
 """
 from __future__ import annotations
 
@@ -176,7 +176,7 @@ def _grid(args: argparse.Namespace, p: HexapodParams, controllers: tuple[str, ..
         rows.append((g, d))
     if args.json:
         doc = {"method": "per point: paired Student t interval (95 %) of the per-seed "
-                         f"difference {b} - {a} of eps_xH + eps_yH (common random numbers)",
+                         f"difference {b} - {a} of trk_xH + eps_yH (common random numbers)",
                "points": [{"ground_percent": g.ground_percent, "spread": g.spread,
                            "t_max": g.t_max, "difference": d.difference.as_dict(),
                            "winner": d.winner, "seeds_needed": d.seeds_needed,
@@ -187,7 +187,7 @@ def _grid(args: argparse.Namespace, p: HexapodParams, controllers: tuple[str, ..
             return 0
         Path(args.json).write_text(text)
     print(f"E8: {len(seeds)} seeds ({seeds[0]}..{seeds[-1]}) per point; hip errors "
-          f"eps_xH + eps_yH (m), {b} - {a}: paired Student t 95 % interval over the same "
+          f"trk_xH + eps_yH (m), {b} - {a}: paired Student t 95 % interval over the same "
           "seeds (common random numbers)")
     print(f"{'T_max':>6} {'ground %':>9} {'spread %':>9} {a + ' (m)':>18} {b + ' (m)':>18} "
           f"{b + ' - ' + a:>24} {'winner':>10} {'seeds needed':>13}")

@@ -45,6 +45,7 @@ from hexapod_common.core.errors import HexapodError
 from hexapod_common.core.controller_names import node_of
 from hexapod_sim.core.uneven_ground import check_seed, check_spread
 from hexapod_common.runtime.rt_sched import HOW_TO_PERMIT, MAX_PRIORITY, realtime_permitted
+from hexapod_common.runtime.liveness import PIDS_ENV
 from hexapod_common.core.params import (CONTROLLERS, MODES, SPECS, HexapodParams,
                                         default_params_path, load_params, read_params_file)
 
@@ -61,11 +62,12 @@ EXIT_CODES: dict[str, int] = {
     "node died": 3,              # another node died or exited non-zero during the run
     "diverged": 6,               # the model blew up (the sim says so and stops)
     "fallback": 7,               # the controller in charge went silent: damping fallback
+    "fallen": 8,                 # a scored gait cycle was not a walk (no indices for it)
     "interrupted": 130,          # Ctrl-C / SIGTERM of a run with a set duration
 }
 #: Order in which causes decide the exit code.
 PRECEDENCE = ("disk full", "recorder failed", "node died", "diverged", "fallback",
-              "interrupted")
+              "fallen", "interrupted")
 #: Stop order: the sim first, the recorder last (it drains its queues).
 STOP_ORDER = ("hexapod_sim", "trajectory_generator", "pd_p_controller", "pd_pf_controller",
               "markers", "foxglove_bridge", "metrics")
@@ -318,26 +320,33 @@ class Launcher:
 
     # ------------------------------------------------------------------ start
     def sim_overrides(self) -> list[str]:
-        """The sim's own parameters: stop, scripted switch, summary file."""
+        """The sim's own parameters: what it waits for, stop, scripted switch, summary file.
+        Each is set here, whatever a params file says of it (a `ros2 param dump` of a
+        running sim carries that run's: its wait_for, switch_to, stop_at_end)."""
         a = self.args
         extra = [f"summary_path:={self.summary_file}"]
         if a.ground_seed is not None:
             extra += [f"ground_seed:={a.ground_seed}",
                       f"ground_spread:={a.ground_spread / 100.0!r}"]
         markers = a.markers or a.foxglove is not None
-        if markers or a.no_builtin or a.controller not in CONTROLLERS:
-            # tick 0 waits for the markers node too, so the markers cover the run from t = 0
-            extra.append(f"wait_for:={join.wait_for(a, ('markers',) if markers else ())}")
+        # tick 0 waits for the markers node too, so the markers cover the run from t = 0
+        extra.append(f"wait_for:={join.wait_for(a, ('markers',) if markers else ())}")
         if a.controller not in CONTROLLERS:
             extra.append(f"run.controller:={a.controller}")
-        switch_to = join.default_switch_to(a)
+        switch_to = join.default_switch_to(a) if not a.no_switch else None
+        at = None
         if a.duration > 0:
             extra.append("stop_at_end:=true")
-            if not a.no_switch and switch_to:
+            if switch_to:
                 at = a.switch_at if a.switch_at is not None else a.duration / 2
-                extra += [f"switch_at:={float(at)!r}", f"switch_to:={switch_to}"]
-        elif not a.no_switch and a.switch_at is not None and switch_to:
-            extra += [f"switch_at:={float(a.switch_at)!r}", f"switch_to:={switch_to}"]
+        else:  # until stopped: the sim's run.duration says so (0)
+            extra += ["stop_at_end:=false", "run.duration:=0.0"]
+            if switch_to and a.switch_at is not None:
+                at = a.switch_at
+        if at is not None:
+            extra += [f"switch_at:={float(at)!r}", f"switch_to:={switch_to}"]
+        else:
+            extra.append("switch_to:=''")  # none (YAML: the empty string)
         return extra
 
     def describe(self) -> str:
@@ -401,9 +410,21 @@ class Launcher:
             g.start("foxglove_bridge", f"port:={self.args.foxglove}")
             print(f"run_graph: Foxglove live view on ws://localhost:{self.args.foxglove} "
                   "(layout: docs/foxglove/hexapod_layout.json)", flush=True)
+        # The sim judges the launcher's nodes alive by their processes (runtime/liveness.py)
+        pids = self.logs / "pids.json"
+        g.env[PIDS_ENV] = str(pids)
+        self._write_pids(pids)
         g.start("hexapod_sim", *self.sim_overrides())
-        (self.logs / "pids.json").write_text(json.dumps(
-            {n: proc.pid for n, proc in g.procs.items()} | {"launcher": os.getpid()}))
+        self._write_pids(pids)
+
+    def _write_pids(self, path: Path) -> None:
+        """Node name -> pid of every process started, and the launcher's (atomically)."""
+        g = self.graph
+        assert g is not None
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({n: proc.pid for n, proc in g.procs.items()}
+                                  | {"launcher": os.getpid()}))
+        os.replace(tmp, path)
 
     # ------------------------------------------------------------------ watch
     def watch(self) -> None:
@@ -580,8 +601,14 @@ def inputs_lines(summary: dict[str, Any] | None, indices: Path) -> list[str]:
             outside.setdefault(topic, set()).update(names)
     lines = ["  inputs: " + ("dropped " + "; ".join(dropped) if dropped
                              else "no message dropped")]
+    if len(dropped) == 2 and len({sum((d.get("dropped") or {}).values()) for _, d in docs}) > 1:
+        lines.append("    (each node counts what reached its own reader: one that matched a "
+                     "publisher later, or whose queue a flood overran, counts fewer)")
     lines.append("  publishers outside the graph: " + ("; ".join(
         f"{t}: {', '.join(sorted(n))}" for t, n in sorted(outside.items())) or "none"))
+    if (summary or {}).get("authentication") == "off":
+        lines.append("  authentication: off (HEXAPOD_AUTH=off): any process on this "
+                     "ROS_DOMAIN_ID could drive the graph, and none was named for it")
     return lines
 
 
@@ -622,38 +649,67 @@ def _change_text(changes: list[dict[str, Any]]) -> str:
     return ", ".join(f"{c['name']} = {c['value']!r} at {c['t']:.3f} s" for c in changes)
 
 
+def fallen_cycles(path: Path) -> list[str]:
+    """'cycle k [t_a, t_b] s: why' of every cycle of ``indices.json`` that was not a walk."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return []
+    return [f"cycle {c['cycle']} [{c['t_a']:g}, {c['t_b']:g}] s: {c['fallen']}"
+            for c in doc.get("cycles", ()) if c.get("fallen")]
+
+
 def indices_lines(path: Path) -> list[str]:
-    """The table of indices per controller segment from ``indices.json``, each cycle under
-    the metrics node's label (``hexapod_common.core.labels``: ``fallback``, ``held`` or
-    ``mixed(...)`` when the controller in charge did not command all its torques)."""
+    """The table of indices per controller segment from ``indices.json``: the per-cycle mean
+    over the gait cycles the controller commanded entirely (``cycles.segments``; model.md:
+    not the index of their union, so a segment of 3 cycles and one of 2 compare), with the
+    drift columns; a segment none of whose cycles it commanded entirely names the label of
+    its last one (``hexapod_common.core.labels``: ``fallback``, ``held``, ``mixed(...)``)."""
     try:
         doc = json.loads(path.read_text())
     except (OSError, ValueError):
         return [f"run_graph: no indices.json in {path.parent} (see the metrics log)"]
     names = doc["index_names"]
     changes = doc.get("parameter_changes") or []
-    out = ["indices per controller segment (last full gait cycle of each):",
-           f"  {'controller':<24} {'segment [s]':<16} {'cycle [s]':<12}"
+    t_of = {c["cycle"]: (c["t_a"], c["t_b"]) for c in doc.get("cycles", ())}
+    out = ["indices per controller segment (per-cycle mean of the full gait cycles it "
+           "commanded):",
+           f"  {'controller':<24} {'segment [s]':<16} {'cycles':<12}"
            + "".join(f"{n:>11}" for n in names)]
     for s in doc["segments"]:
         c = s["last_full_cycle"]
         seg = f"[{s['t_start']:g}, {s['t_end']:g}]"
+        own = [k for k in s.get("mean_cycles", ()) if k in t_of]
         if c is None:
             out.append(f"  {s['controller']:<24} {seg:<16} no full gait cycle")
             continue
-        label = c.get("label", s["controller"])
-        row = "".join(f"{c['indices'][n]:>11.4g}" for n in names)
-        out.append(f"  {label:<24} {seg:<16} {'[%g, %g]' % (c['t_a'], c['t_b']):<12}{row}")
-        # live parameter changes: inside the cycle the numbers mix two settings; before it
-        # (in this segment) they are the new setting's, not the segment start's
-        inside = _changes_in(changes, c["t_a"], c["t_b"] - 1e-9)
-        before = _changes_in(changes, s["t_start"] - 1e-9, c["t_a"])
+        if s.get("fallen"):  # not a walk: no numbers (hexapod_metrics.core.walking)
+            out.append(f"  {s['controller']:<24} {seg:<16} {'':<12}  no indices: {s['fallen']}")
+            continue
+        mean = s.get("per_cycle_mean")
+        if mean is None or not own:
+            label = c.get("label", s["controller"])
+            out.append(f"  {label:<24} {seg:<16} {'':<12}  no cycle commanded entirely by "
+                       f"{s['controller']} (the last: {label})")
+            continue
+        span = f"{len(own)}: {own[0]}-{own[-1]}" if len(own) > 1 else f"1: {own[0]}"
+        row = "".join(f"{mean[n]:>11.4g}" for n in names)
+        out.append(f"  {s['controller']:<24} {seg:<16} {span:<12}{row}")
+        # live parameter changes: the mean then mixes two settings; before its cycles (in
+        # this segment) they are the new setting's, not the segment start's
+        t_a, t_b = t_of[own[0]][0], t_of[own[-1]][1]
+        inside = _changes_in(changes, t_a, t_b - 1e-9)
+        before = _changes_in(changes, s["t_start"] - 1e-9, t_a)
         if inside:
-            out.append(f"    ^ this cycle spans a live parameter change: "
-                       f"{_change_text(inside)}")
+            out.append(f"    ^ these cycles span a live parameter change (hexapod analyze "
+                       f"splits the segment there): {_change_text(inside)}")
         if before:
             out.append(f"    ^ after a live parameter change in this segment: "
                        f"{_change_text(before)}")
+    if changes:  # every one, also those of a controller not in charge (its own gains)
+        out.append("live parameter changes (each from the tick its node applied it): "
+                   + ", ".join(f"{c['name']} = {c['value']!r} at {c['t']:.3f} s "
+                               f"(tick {c['tick']}, {c['node']})" for c in changes))
     return out
 
 
@@ -684,6 +740,10 @@ def run(argv: Sequence[str] | None = None, prog: str = "run_graph") -> int:
             return EXIT_CODES["bad settings"]
         launcher.watch()
         launcher.stop()
+        fell = fallen_cycles(launcher.bag / "indices.json")
+        if fell:
+            launcher.outcome.add("fallen", f"{len(fell)} scored gait cycles were not a walk, "
+                                 f"the first: {fell[0]}")
         if launcher.stop_signal is not None and args.duration > 0:
             name = signal.Signals(launcher.stop_signal).name
             launcher.outcome.add("interrupted", f"stopped by {name} before the end of the run")

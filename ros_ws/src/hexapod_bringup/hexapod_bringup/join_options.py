@@ -14,7 +14,9 @@ from collections.abc import Mapping
 
 from hexapod_common.core.controller_names import check_name, engine_names, node_of
 from hexapod_common.core.errors import HexapodError
-from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV
+
+#: The Fast DDS profile of the run (its transports, lease and the tick topics' partition).
+PROFILE_ENV = "FASTRTPS_DEFAULT_PROFILES_FILE"
 
 GRAPH_WAIT = ("trajectory_generator", "pd_p_controller", "pd_pf_controller", "metrics")
 
@@ -29,8 +31,23 @@ def builtin_list(text: str) -> tuple[str, ...]:
     return names
 
 
+#: What a module:Class path on the graph's command line is told (one line).
+REGISTER_HINT = ("the graph runs a plug-in by its registered name: declare it in your "
+                 "package's setup.py, entry_points={{'hexapod.controllers': ['NAME = "
+                 "{module}:{cls}']}}, install the package with "
+                 "`scripts/install_controller.sh PATH` and use --controller NAME "
+                 "(docs/controllers.md, 'Engine plug-ins'); `hexapod simulate --controller "
+                 "{text}` runs it as it is")
+
+
 def controller_arg(text: str) -> str:
-    """argparse type of ``--controller``: a controller name (built in or joining)."""
+    """argparse type of ``--controller``: a controller name (built in or joining); a
+    module:Class path is refused with how to register it."""
+    if ":" in text:
+        module, _, cls = text.partition(":")
+        raise argparse.ArgumentTypeError(f"{text!r} is a module:Class path: " +
+                                         REGISTER_HINT.format(module=module, cls=cls,
+                                                              text=text))
     try:
         return check_name(text, "controller")
     except HexapodError as err:
@@ -92,13 +109,20 @@ def wait_for(args: argparse.Namespace, extra: tuple[str, ...] = ()) -> str:
 
 def join_lines(env: Mapping[str, str], domain: str) -> list[str]:
     """How an external controller node joins this run."""
+    # here, not at the top: `hexapod switch` parses its argument with controller_arg and
+    # must start fast (msg_auth loads numpy)
+    from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV
+
     if env.get(AUTH_ENV, "on").lower() == "off":
         key = f"{AUTH_ENV}=off (no key: messages are not authenticated)"
     else:
         key = f"{KEY_ENV}={env.get(KEY_ENV, '?')}"
-    return [f"run_graph: a controller node joins with ROS_DOMAIN_ID={domain} {key} "
-            f"(Python: hexapod_common.auth.signer reads the key from {KEY_ENV}; other "
-            f"languages: docs/controllers.md), then `scripts/hexapod switch NAME`"]
+    profile = env.get(PROFILE_ENV)
+    dds = f" {PROFILE_ENV}={profile}" if profile else ""
+    return [f"run_graph: a controller node joins with ROS_DOMAIN_ID={domain} {key}{dds} "
+            f"(Python: hexapod_common.auth.signer reads the key from {KEY_ENV}; the DDS "
+            f"profile puts the tick topics in the run's partition; other languages: "
+            f"docs/controllers.md), then `scripts/hexapod switch NAME`"]
 
 
 __all__ = ["add_options", "builtin_list", "builtins", "check", "controller_arg",

@@ -3,8 +3,9 @@
 PD-P and PD-P&F run their compiled law (PD-P&F with ``pd_pf.force_loop: drive`` sends
 24-entry drive commands); a registered plug-in (``hexapod controllers``, e.g. ``pd_alpha``)
 runs in a node named as the controller, its ``law`` called per tick through
-``controller_api.call_law`` as the engine's closed loop calls it (hip rows of its
-observation NaN: the node does not take ``/hexapod/hip_states``).
+``controller_api.call_law`` as the engine's closed loop calls it, on the same observation:
+a plug-in's node also takes ``/hexapod/hip_states`` (the hip rows; the sim publishes them
+after the states of the tick, so a plug-in waits for them as for a late input).
 
 Lifecycle: *configure* reads the gains (``pd_p.*`` or ``pd_pf.*``; they may also change
 while running), creates the command publisher and subscribes to the reference and the foot
@@ -73,7 +74,7 @@ from hexapod_common.runtime import inputs_matched
 from hexapod_common.core import cdr
 from hexapod_common.core.controller_names import node_of
 from hexapod_common.core.errors import CdrError, ParameterError
-from hexapod_common.core.layout import C_KD, C_KF, C_KP, C_TFF, COMMAND_SHAPE, O_HF, O_HP, O_HV
+from hexapod_common.core.layout import C_KD, C_KF, C_KP, C_TFF, COMMAND_SHAPE
 from hexapod_common.core.params import CONTROLLERS, controller_group
 
 from .core import registry
@@ -142,10 +143,15 @@ class ControllerNode(LifecycleNode):
         self.named = False  # named by the newest /hexapod/active_controller
         self.refs: dict[int, C.JointStateView] = {}
         self.forces: dict[int, C.JointStateView] = {}
+        self.hips: dict[int, C.JointStateView] = {}  # a plug-in's only
+        # The inputs a state waits for besides itself: (topic, its buffer by stamp)
+        self.inputs: tuple[tuple[str, dict[int, C.JointStateView]], ...] = (
+            (T.REFERENCE, self.refs), (T.FOOT_FORCES, self.forces)) + (
+            ((T.HIP_STATES, self.hips),) if self.plugin else ())
         # Inputs taken while not in charge, authenticated but not decoded yet: stamp -> the
         # serialized sample and its payload's size (see _on_input).
-        self.unchecked: dict[str, dict[int, tuple[bytes, int]]] = {T.REFERENCE: {},
-                                                                   T.FOOT_FORCES: {}}
+        self.unchecked: dict[str, dict[int, tuple[bytes, int]]] = {t: {} for t, _ in
+                                                                   self.inputs}
         # States of ours waiting for their reference or foot forces (answered, in order, as
         # soon as those are there, also after newer states: late beats never in realtime).
         self.pending: dict[int, C.JointStateView] = {}
@@ -162,20 +168,25 @@ class ControllerNode(LifecycleNode):
         self.input_floor = -1  # inputs of ticks before it are not needed (no state to answer)
         self._load_gains(self.binding.params)
         self.period_ns = int(round(self.binding.params.sim.control_period * 1e9))
-        if self.plugin:  # not sent to controllers: NaN, never a plausible number
-            self.obs[O_HP] = self.obs[O_HV] = self.obs[O_HF] = np.nan
-        else:
+        if not self.plugin:
             self._law()  # warm up the compiled law before the first tick
         self.last_state = -1  # stamp of the newest state of ours (ns)
         self.announcer = ParamAnnouncer(self, self.binding.params.sim.control_period,
                                         self._next_tick)
 
     def _next_tick(self) -> int:
-        """The first tick answered with a parameter changed now."""
+        """The first tick answered with a parameter changed now: the oldest state waiting
+        for its inputs, else the tick after the newest state seen (an idle controller's
+        too: it takes its queued states first, so the tick is the graph's, not the one it
+        last answered)."""
         period_ns = T.stamp_ns(self.binding.params.sim.control_period)
+        states = self.subs.get(T.JOINT_STATES)
+        if not self.in_charge and states is not None:
+            self.loop.take(states)
         if self.pending:  # states waiting for their inputs: the oldest is answered next
             return C.tick_of(min(self.pending), period_ns)
-        return C.tick_of(self.last_state, period_ns) + 1 if self.last_state >= 0 else 0
+        newest = max(self.last_state, -1 if self.window.newest is None else self.window.newest)
+        return C.tick_of(newest, period_ns) + 1 if newest >= 0 else 0
 
     # ------------------------------------------------------------------ parameters
     def _load_gains(self, p: HexapodParams) -> None:
@@ -210,6 +221,10 @@ class ControllerNode(LifecycleNode):
         self.subs[T.FOOT_FORCES] = self.loop.subscribe(
             JointState, T.FOOT_FORCES, self._on_forces,
             C.TOPIC_QOS[T.FOOT_FORCES].subscriber(C.CONTROL_DEPTH), wake=False)
+        if self.plugin:  # the hip rows of a plug-in's observation, as the engine's
+            self.subs[T.HIP_STATES] = self.loop.subscribe(
+                JointState, T.HIP_STATES, self._on_hips,
+                C.TOPIC_QOS[T.HIP_STATES].subscriber(C.CONTROL_DEPTH), wake=False)
         self.log.info(f"configured: {self.described}"
                       + ("; force loop in the drive (24-entry drive commands)"
                          if self.drive else ""))
@@ -258,8 +273,8 @@ class ControllerNode(LifecycleNode):
         if self.pub is not None:
             self.destroy_lifecycle_publisher(self.pub)
             self.pub = None
-        self.refs.clear()
-        self.forces.clear()
+        for _, buf in self.inputs:
+            buf.clear()
         for held in self.unchecked.values():
             held.clear()
 
@@ -291,7 +306,7 @@ class ControllerNode(LifecycleNode):
                 self.loop.set_wake(states, True)
             elif self.loop.deadline is None:
                 self.loop.set_deadline(time.monotonic() + IDLE_DRAIN, self._drain)
-        for topic in (T.REFERENCE, T.FOOT_FORCES):
+        for topic, _ in self.inputs:
             sub = self.subs.get(topic)
             if sub is not None:
                 self.loop.take(sub)
@@ -329,7 +344,7 @@ class ControllerNode(LifecycleNode):
     def _check_unchecked(self, stamp: int | None = None) -> None:
         """Check the inputs kept unchecked: those of tick ``stamp`` (ns), or all (None;
         those of ticks before the newest state are skipped unchecked, as on arrival)."""
-        for topic, buf in ((T.REFERENCE, self.refs), (T.FOOT_FORCES, self.forces)):
+        for topic, buf in self.inputs:
             held = self.unchecked[topic]
             if stamp is not None:
                 got = held.pop(stamp, None)
@@ -363,6 +378,9 @@ class ControllerNode(LifecycleNode):
 
     def _on_forces(self, data: bytes) -> None:
         self._on_input(T.FOOT_FORCES, self.forces, data)
+
+    def _on_hips(self, data: bytes) -> None:
+        self._on_input(T.HIP_STATES, self.hips, data)
 
     def _on_active(self, data: bytes) -> None:
         """``/hexapod/active_controller`` (the sim's, authenticated): named, this controller
@@ -408,8 +426,8 @@ class ControllerNode(LifecycleNode):
             self.loop.set_wake(self.subs[T.JOINT_STATES], True)
         if mine and T.REFERENCE in self.subs:
             self._check_unchecked(stamp)  # this tick's, kept while another was in charge
-            self.loop.take(self.subs[T.REFERENCE])
-            self.loop.take(self.subs[T.FOOT_FORCES])
+            for topic, _ in self.inputs:
+                self.loop.take(self.subs[topic])
         else:  # not ours: its inputs, and the next states, can wait a few ms
             if not self.named:
                 self.loop.set_wake(self.subs[T.JOINT_STATES], False)
@@ -424,8 +442,8 @@ class ControllerNode(LifecycleNode):
             self._answer()
             if self.pending:  # an input is late: let it wake us
                 self._count_wait(stamp)
-                self.loop.set_wake(self.subs[T.REFERENCE], True)
-                self.loop.set_wake(self.subs[T.FOOT_FORCES], True)
+                for topic, _ in self.inputs:
+                    self.loop.set_wake(self.subs[topic], True)
         # After the command is out (off the round trip): take the next tick's reference if
         # it is there already (the generator publishes ahead of the states), so that the next
         # state finds it checked; forget the inputs of answered ticks.
@@ -433,17 +451,18 @@ class ControllerNode(LifecycleNode):
             self.loop.take(self.subs[T.REFERENCE])
             self._check_unchecked()  # after a switch: the rest of what was kept unchecked
         keep = min(self.pending, default=stamp)
-        for buf in (self.refs, self.forces):
+        for _, buf in self.inputs:
             for s in [s for s in buf if s < keep]:
                 del buf[s]
 
     def _count_wait(self, stamp: int) -> None:
-        """A state of ours (``stamp``, ns) waits: count which input is missing, and say so
-        in a warning (from the WARN_AFTER-th wait on, at most every WARN_EVERY wall s): the
-        cause of missed ticks the sim reports (a starved trajectory generator shows as
-        waits for the reference)."""
+        """A state of ours (``stamp``, ns) came while states are pending: if it waits itself,
+        count which input is missing and say so in a warning (from the WARN_AFTER-th wait
+        on, at most every WARN_EVERY wall s): the cause of missed ticks the sim reports (a
+        starved trajectory generator shows as waits for the reference)."""
         ref, ff = stamp not in self.refs, stamp not in self.forces
-        self.waits.count(ref, ff)
+        if not self.waits.count(ref, ff):
+            return  # answered already: the state still pending is an older one, counted then
         now = time.monotonic()
         if self.waits.waited >= WARN_AFTER and now - self.warned_at >= WARN_EVERY:
             self.warned_at = now
@@ -460,11 +479,14 @@ class ControllerNode(LifecycleNode):
         for stamp in sorted(self.pending):
             ref = self.refs.get(stamp)
             ff = self.forces.get(stamp)
-            if ref is None or ff is None:
+            hip = self.hips.get(stamp) if self.plugin else None
+            if ref is None or ff is None or (self.plugin and hip is None):
                 continue
             js = self.pending.pop(stamp)
             C.fill_obs(self.obs, T.JOINT_STATES, js.position, js.velocity, js.effort)
             C.fill_obs(self.obs, T.FOOT_FORCES, ff.position, ff.velocity, ff.effort)
+            if hip is not None:
+                C.fill_obs(self.obs, T.HIP_STATES, hip.position, hip.velocity, hip.effort)
             r = T.split_reference(ref.position, ref.velocity)
             self.theta_d[:] = r["theta"]
             self.theta_vel_d[:] = r["theta_vel"]
@@ -493,8 +515,8 @@ class ControllerNode(LifecycleNode):
                 tr.mark(_trace.PUB1, T.JOINT_COMMANDS, stamp)
             self.answered += 1
         if not self.pending:
-            self.loop.set_wake(self.subs[T.REFERENCE], False)
-            self.loop.set_wake(self.subs[T.FOOT_FORCES], False)
+            for topic, _ in self.inputs:
+                self.loop.set_wake(self.subs[topic], False)
 
     def _law(self) -> None:
         control_law(self.code, self.gains, self.obs, self.theta_d, self.theta_vel_d, self.l1,

@@ -48,6 +48,7 @@ from .core.cycles import CYCLE_TOPICS, Cycle, CycleScorer, segments
 from .core.indices import INDEX_NAMES, REPORTED_NAMES
 from .core.log_times import ControllerLogTimes, marker_array_stamp
 from .core.recording import ParamRecorder, indices_status
+from .core.walking import not_walking
 
 #: Exit code of a recorder whose bag could not be written to the end (disk full, ...).
 EXIT_RECORDING_FAILED = 3
@@ -64,8 +65,14 @@ class MetricsNode(Node):
         # takes its queues in batches, topic by topic, and may lag by seconds: the window is
         # wide (a stamp of 1e6 s, which once made the scorer skip a million cycles, is not).
         self.window = M.StampWindow(ahead_s=60.0)
-        # /hexapod/active_controller names an engine controller or a node on the graph
+        # /hexapod/active_controller names a controller (the naming rule) that is built in,
+        # whose node is on the graph, or that the sim's states name (_on_controller)
         self.controller_names = NamesOnGraph(self)
+        self.any_controller = NamesOnGraph(self, on_graph=False)
+        # (name, payload, newest state stamp when it came): announcements decided at the
+        # states (a joined controller in charge from tick 0 is announced before this node
+        # may have discovered it)
+        self.undecided: list[tuple[str, bytes, int]] = []
         self.binding = ParamBinding(self, declare_params(self))
         p = self.binding.params
         default = "bags/" + time.strftime("%Y%m%d-%H%M%S")
@@ -83,7 +90,8 @@ class MetricsNode(Node):
         # behind the others (dead; memory stays bounded).
         n = int(round(p.cycle_time / self.period))
         gap = 10 * n
-        self.scorer = CycleScorer(n, self.period, gap_ticks=gap)
+        self.scorer = CycleScorer(n, self.period, gap_ticks=gap,
+                                  walk=lambda sums: not_walking(sums, p))
         self.writer = BagWriter(self.bag_path, custom_data={"source": "metrics node"},
                                 flush_interval_s=0.5, sync_topics=TICK_TOPICS,
                                 follow_topics=(T.MARKERS,),
@@ -156,6 +164,29 @@ class MetricsNode(Node):
             self.log.info(f"controller in charge: {C.decode_string(data)} "
                           f"(from sim time {log_time * 1e-9:.3f} s)")
 
+    def _on_controller(self, payload: bytes, name: str) -> None:
+        """An authentic announcement of the controller in charge: recorded if it is built in,
+        its node is on the graph or the states name it; else decided at the next states."""
+        if name in self.controller_names or name == self.controller_times.frame:
+            self._write_controller(self.controller_times.on_controller(name, payload))
+        else:
+            self.undecided.append((name, payload, self.clock_ns))
+
+    def _decide_controllers(self, stamp: int, frame: str | None) -> None:
+        """Record the undecided announcements that the states (``frame``: the controller in
+        charge at ``stamp``) or the graph now vouch for; drop those neither did within
+        ControllerLogTimes' patience (1 s of simulated time), counted as bad content."""
+        keep = []
+        for name, payload, since in self.undecided:
+            if name == frame or name in self.controller_names:
+                self._write_controller(self.controller_times.on_controller(name, payload))
+            elif stamp - since > self.controller_times.patience:
+                self.guard.drop(T.ACTIVE_CONTROLLER, M.BAD_CONTENT,
+                                f"{name!r} is none of the controllers on the graph")
+            else:
+                keep.append((name, payload, since))
+        self.undecided = keep
+
     def _subscribe(self, topic: str) -> None:
         # Every message is authenticated and checked by the guard first (a dropped one is
         # counted and reported, never recorded); the bag gets the payload without trailer.
@@ -176,6 +207,8 @@ class MetricsNode(Node):
                     self._write(T.CLOCK, stamp, C.encode_clock(stamp))
                 self._write(topic, stamp, payload)
                 if topic == T.JOINT_STATES:
+                    if self.undecided:
+                        self._decide_controllers(stamp, in_charge(view.frame_id))
                     self._write_controller(self.controller_times.on_state(
                         stamp, in_charge(view.frame_id)))
                     if tick >= self.next_recorded:
@@ -198,10 +231,9 @@ class MetricsNode(Node):
             cb = self._on_param_record
         elif topic == T.ACTIVE_CONTROLLER:  # at the tick the switch took effect
             def cb(data: bytes, topic: str = topic) -> None:
-                got = g.string(topic, data, self.controller_names)
-                if got is None:
-                    return
-                self._write_controller(self.controller_times.on_controller(got[1], got[0]))
+                got = g.string(topic, data, self.any_controller)
+                if got is not None:
+                    self._on_controller(*got)
         else:  # status (diagnostic arrays of the graph's nodes)
             def cb(data: bytes, topic: str = topic) -> None:
                 payload = g.payload(topic, data)
@@ -253,11 +285,14 @@ class MetricsNode(Node):
 
     def _publish_cycle(self, cycle: Cycle) -> None:
         idx = cycle.indices
-        assert idx is not None
         stamp = T.stamp_ns(cycle.t_b)
         data = cdr.encode_diagnostic_array(stamp, [indices_status(cycle)])
         self.pub_indices.publish(self.indices_signer.sign(data))
         self._write(T.INDICES, stamp, data)
+        if idx is None:
+            self.log.warning(f"cycle {cycle.cycle} [{cycle.t_a:g}, {cycle.t_b:g}] s "
+                             f"({cycle.in_charge}): {cycle.fallen}; no indices")
+            return
         self.log.info(
             f"cycle {cycle.cycle} [{cycle.t_a:g}, {cycle.t_b:g}] s ({cycle.controller}): "
             + ", ".join(f"{n} {getattr(idx, n):.4g}" for n in INDEX_NAMES)
@@ -282,6 +317,10 @@ class MetricsNode(Node):
         try:
             if self.failure is None:
                 self.loop.drain()
+                for name, _, _ in self.undecided:  # never named by the states
+                    self.guard.drop(T.ACTIVE_CONTROLLER, M.BAD_CONTENT,
+                                    f"{name!r} is none of the controllers on the graph")
+                self.undecided = []
                 self._write_controller(self.controller_times.flush())
             self.lost_in_transit = self.guard.missing()
         finally:

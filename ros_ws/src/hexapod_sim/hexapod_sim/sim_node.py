@@ -36,16 +36,20 @@ from .core.actuator import saturate
 from .core.physics import Physics
 from .core.recorder_pace import RecorderPace
 from hexapod_common.core.errors import CdrError, ParameterError
-from hexapod_common.core.controller_names import check_name, engine_names, node_of
-from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller
+from hexapod_common.core.controller_names import (check_name, engine_names, name_of, node_of,
+                                                  reserved_hint)
+from hexapod_common.core.params import N_LEGS, HexapodParams, check_controller, controller_names
 from hexapod_common.core.switch_channel import ChannelError, SwitchServer
+from .channel_service import ChannelService, lifecycle
 from hexapod_common.core import cdr
 from hexapod_common.core import trace as _trace
-from .core.tick_machine import SWITCH_WINDOW, Outcome, TickMachine, Wait
+from hexapod_common.core.labels import COMMANDED
+from .core.tick_machine import LIVENESS_LOOK, SWITCH_WINDOW, Outcome, TickMachine, Wait
 from .core.uneven_ground import GroundDraws, pairs_for
 from hexapod_common.runtime.hot_loop import FastLogger, HotLoop
 from hexapod_common.runtime import inputs_matched
 from hexapod_common.runtime.input_guard import InputGuard
+from hexapod_common.runtime.liveness import Liveness, launcher_pids
 from hexapod_common.runtime.node_main import run_node
 from hexapod_common.runtime.controller_graph import controller_nodes, controllers_on_graph
 from hexapod_common.runtime.controller_params import ControllerParamsReader
@@ -56,6 +60,10 @@ from hexapod_common.runtime.rt_sched import use_rt_priority
 #: Endpoints each node of the graph shows once it is ready to run (subscriptions, publications).
 #: A controller node's endpoints (also those of a joined controller in charge at start).
 CONTROLLER_ENDPOINTS = ((T.JOINT_STATES, T.REFERENCE), (T.JOINT_COMMANDS,))
+#: A registered plug-in's node (the project's controller node running its law): every
+#: sample topic of the engine's observation (it answers inputs_matched, as the built-ins').
+PLUGIN_ENDPOINTS = ((T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE),
+                    (T.JOINT_COMMANDS,))
 EXPECTED_ENDPOINTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "trajectory_generator": ((T.JOINT_STATES,), (T.REFERENCE,)),
     "pd_p_controller": ((T.JOINT_STATES, T.FOOT_FORCES, T.REFERENCE), (T.JOINT_COMMANDS,)),
@@ -70,7 +78,6 @@ STATUS_PERIOD = 0.5  # wall s between /hexapod/status messages
 #: each here) and at whether /clock has a subscriber (publishing to none costs ~15 us):
 #: per tick at 1-2 kHz lockstep that was a few % of the sim's thread.
 LOOK_PERIOD = 0.002
-STATE_CHECK_TIMEOUT = 2.0  # s a switch-channel request waits for the controller's get_state
 INPUTS_TIMEOUT = 5.0  # s tick 0 waits for the readers' side of the matching (inputs_matched)
 #: s tick 0 waits more for a joined controller in charge (it has no inputs_matched service):
 #: for its command writer to match the recorder's reader. 0.5 s lost the first ~30 of 2000
@@ -83,6 +90,9 @@ RECORDER_PATIENCE = 5.0
 #: recorder left the graph (closed, or dropped as dead) or joined it, the hold ends.
 RECORDER_LOOK = 0.25
 INPUTS_RETRY = 0.02  # s between two questions to a node whose readers have not matched
+#: The nodes a lockstep tick waits for besides the controller in charge (while they live).
+TRAJECTORY_NODE = "trajectory_generator"
+RECORDER_NODE = "metrics"
 
 
 class AfterSendLog:
@@ -134,6 +144,9 @@ class SimNode(Node):
         self.binding = ParamBinding(self, declare_params(self, checks=checks), self._on_params,
                                     check=self._check_change, log=self.later, checks=checks)
         self.stop_at_end = declare_node_param(self, "stop_at_end")
+        if self.stop_at_end and self.params.run.duration == 0:
+            raise ParameterError("run.duration", 0.0, "a duration in (0, 1e+06] s when "
+                                 "stop_at_end is true (0: a run until stopped)")
         wait_for = declare_node_param(self, "wait_for")
         self.wait_for = [n.strip() for n in wait_for.split(",") if n.strip()]
         self.startup_timeout = declare_node_param(self, "startup_timeout")
@@ -180,23 +193,25 @@ class SimNode(Node):
         self.pace = RecorderPace(T.RECORDER_LAG, RECORDER_PATIENCE)
         self.recorded_sub = None
         self.recorders = 0  # writers of /hexapod/recorded when a recorder last spoke
+        # Lockstep waits for the living (runtime/liveness.py): the launcher's processes by
+        # pid, any other node by the graph's node list.
+        self.liveness = Liveness(self.get_node_names)
         if self.mode == "lockstep":
             self.recorded_sub = self.loop.subscribe(
                 DiagnosticArray, T.RECORDED, self._on_recorded,
                 C.RECORDED_QOS.subscriber(C.RECORDED_QOS.depth))
-        # `hexapod switch` asks here first (core/switch_channel.py): no ROS context per call.
-        self.channel: SwitchServer | None = None
+        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
+        # `hexapod switch` and `hexapod status` ask here first (core/switch_channel.py,
+        # channel_service.py): no ROS context per call.
+        server: SwitchServer | None = None
         try:
-            self.channel = SwitchServer.open(os.environ.get("ROS_DOMAIN_ID", "0"))
+            server = SwitchServer.open(os.environ.get("ROS_DOMAIN_ID", "0"))
         except (ChannelError, OSError) as err:
-            self.log.warning(f"no local switch channel ({err}); `hexapod switch` uses the "
-                             f"ROS parameter service instead")
-        self.state_clients: dict[str, Any] = {}
+            self.log.warning(f"no local switch channel ({err}); `hexapod switch` and "
+                             f"`hexapod status` use ROS services and topics instead")
+        self.channel = ChannelService(self, server)
         self.next_look = 0.0  # monotonic s: the next look at the channel and /clock
         self.clock_wanted = True  # /clock has a subscriber (looked at every LOOK_PERIOD)
-        # (controller, reply to, future, monotonic time to give up)
-        self.state_checks: list[tuple[str, str, Any, float]] = []
-        self.steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(STATUS_PERIOD, self._publish_status, clock=self.steady)
 
         self.prepared: tuple[int, int, list[tuple[Any, bytes]]] = (0, 0, [])
@@ -253,30 +268,44 @@ class SimNode(Node):
     def _check_change(self, changes: list[Parameter]) -> str | None:
         """Refuse a ``run.controller`` change to a controller that cannot take over now."""
         for p in changes:
-            if p.name == "run.controller" and isinstance(p.value, str) and \
-                    p.value != self.ticks.in_charge:
-                why = self.controller_unready(p.value)
+            if p.name == "run.controller" and isinstance(p.value, str):
+                # the controller in charge again: its node must still be there
+                why = (self.controller_absent(p.value) if p.value == self.ticks.in_charge
+                       else self.controller_unready(p.value))
                 if why:
                     return f"run.controller = {p.value!r} refused: {why}"
         return None
+
+    def controller_absent(self, controller: str) -> str:
+        """Why ``controller`` cannot take over: its node is not on the graph ('' if it is)."""
+        node = node_of(controller)
+        if node in self.get_node_names():
+            return ""
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        in_charge = (f", though {controller} is in charge (its node has left the graph or "
+                     f"never joined)" if controller == self.ticks.in_charge else "")
+        reserved = (f"; {reserved_hint(controller)}" if name_of(controller) is None
+                    and controller in self.get_node_names() else "")
+        return (f"no controller node {node} on ROS_DOMAIN_ID={domain}{in_charge} (controllers "
+                f"on the graph: {', '.join(controllers_on_graph(self)) or 'none'}){reserved}")
 
     def controller_unready(self, controller: str) -> str:
         """Why ``controller`` cannot take over at the next tick ('' if it can).
 
         Asked of the graph by node (tens of microseconds), not by topic: the endpoint
         infos by topic cost ~0.3 ms here, which a realtime tick cannot spare."""
+        absent = self.controller_absent(controller)
+        if absent:
+            return absent
         node = node_of(controller)
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
-        if node not in self.get_node_names():
-            return (f"no controller node {node} on ROS_DOMAIN_ID={domain} (controllers on the "
-                    f"graph: {', '.join(controllers_on_graph(self)) or 'none'})")
         try:
             subs = {t for t, _ in self.get_subscriber_names_and_types_by_node(node, "/")}
             pubs = {t for t, _ in self.get_publisher_names_and_types_by_node(node, "/")}
         except NodeNameNonExistentError:  # gone between the two questions
             return f"{node} is not running on ROS_DOMAIN_ID={domain}"
         if T.JOINT_STATES not in subs:
-            if controller in engine_names() or self._lifecycle(node):
+            if self.is_lifecycle(node):
                 return (f"{node} is not active (no subscription to {T.JOINT_STATES}): "
                         f"activate it first (hexapod switch {controller} does)")
             return (f"{node} does not subscribe to {T.JOINT_STATES} (yet: a node just "
@@ -290,7 +319,7 @@ class SimNode(Node):
 
     def _on_params(self, p: HexapodParams, names: set[str]) -> None:
         if "run.controller" in names and p.run.controller != self.ticks.in_charge:
-            if p.run.controller not in engine_names():
+            if self.joined(p.run.controller):
                 self.controller_params.prepare(p.run.controller)
             self.ticks.request_switch(p.run.controller)
             self.later.info(f"switch to {p.run.controller} requested: takes effect at "
@@ -303,8 +332,7 @@ class SimNode(Node):
         """What is still missing before tick 0 may be published (empty when ready)."""
         missing = []
         for node in self.wait_for:
-            subs, pubs = EXPECTED_ENDPOINTS.get(node, CONTROLLER_ENDPOINTS if node == node_of(
-                self.ticks.in_charge) else ((), ()))
+            subs, pubs = self._endpoints(node)
             if node not in self.get_node_names():
                 missing.append(f"node {node}")
                 continue
@@ -324,6 +352,15 @@ class SimNode(Node):
             missing.append(f"matching of {T.JOINT_COMMANDS}")
         return missing
 
+    def _endpoints(self, node: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(subscriptions, publications) node ``node`` of ``wait_for`` shows once ready."""
+        if node in EXPECTED_ENDPOINTS:
+            return EXPECTED_ENDPOINTS[node]
+        name = name_of(node)
+        if name is not None and name not in engine_names() and name in controller_names():
+            return PLUGIN_ENDPOINTS
+        return CONTROLLER_ENDPOINTS if node == node_of(self.ticks.in_charge) else ((), ())
+
     def _check_controllers(self) -> None:
         """Ask each expected controller its lifecycle state (and say if it is not active).
 
@@ -332,10 +369,9 @@ class SimNode(Node):
         """
         from lifecycle_msgs.srv import GetState
 
-        names = [n for n in self.wait_for if n.endswith("_controller") and self._lifecycle(n)]
-        # Kept for the switch channel's checks: a client made at switch time may send its
-        # request before the controller's service has matched it, and wait forever.
-        clients = [self._state_client(n) for n in names]
+        names = [n for n in self.wait_for if n.endswith("_controller") and self.is_lifecycle(n)]
+        # Kept for the switch channel's checks (channel_service.py)
+        clients = [self.channel.state_client(n) for n in names]
         futures = [c.call_async(GetState.Request()) for c in clients]
         self.loop.spin(until=lambda: all(f.done() for f in futures), timeout=5.0)
         for name, future in zip(names, futures):
@@ -358,8 +394,9 @@ class SimNode(Node):
         anyway, with an error naming who is not ready, after the timeout."""
         from std_srvs.srv import Trigger
 
-        names = [n for n in self.wait_for
-                 if set(EXPECTED_ENDPOINTS.get(n, ((), ()))[0]) & set(inputs_matched.SIM_TOPICS)]
+        names = [n for n in self.wait_for  # the nodes that answer inputs_matched
+                 if (n in EXPECTED_ENDPOINTS or self._endpoints(n) is PLUGIN_ENDPOINTS)
+                 and set(self._endpoints(n)[0]) & set(inputs_matched.SIM_TOPICS)]
         clients = {n: self.create_client(Trigger, inputs_matched.service_name(n))
                    for n in names}
         self.loop.refresh()
@@ -442,7 +479,7 @@ class SimNode(Node):
             f"{self.mode} mode, {1 / self.period:g} Hz control, {self.ticks.in_charge} in charge, "
             f"run.duration {self.params.run.duration:g} s"
             + (" (stops there)" if self.stop_at_end else " (runs until stopped)"))
-        if self.ticks.in_charge not in engine_names():
+        if self.joined(self.ticks.in_charge):
             self.controller_params.read(self.ticks.in_charge, 0)
         if self.rt is not None:  # every peer matched: receive threads made meanwhile too
             late = self.rt.refresh()
@@ -453,13 +490,18 @@ class SimNode(Node):
         self._prepare()
         self._send()
 
-    def _lifecycle(self, node: str) -> bool:
+    def joined(self, controller: str) -> bool:
+        """Whether ``controller``'s node joined the graph (its own parameters go into the
+        bag when it takes over): any controller not built in, and a built-in one whose node
+        the launcher did not start (a node in its place: docs/controllers.md, "Naming")."""
+        if controller not in engine_names():
+            return True
+        pids = launcher_pids()
+        return bool(pids) and node_of(controller) not in pids
+
+    def is_lifecycle(self, node: str) -> bool:
         """Whether ``node`` is on the graph with a lifecycle ``get_state`` service."""
-        try:
-            services = self.get_service_names_and_types_by_node(node, "/")
-        except NodeNameNonExistentError:
-            return False
-        return any(s == f"/{node}/get_state" for s, _ in services)
+        return lifecycle(self, node)
 
     def _record_controller(self, controller: str, tick: int, values: dict[str, Any]) -> None:
         """Publish a joined controller's parameters as a 'controller' record of its tick."""
@@ -556,25 +598,34 @@ class SimNode(Node):
         """Lockstep: whether tick ``k`` waits for the recorder (core/recorder_pace.py); if so
         :meth:`_send` runs again when it is heard, at the next look or when it is given up."""
         now = time.monotonic()
-        gave_up = self.pace.gave_up
-        until = self.pace.hold_until(k, now)
-        if until is None:
-            if self.pace.gave_up > gave_up:
-                self.log.warning(
-                    f"the recorder has said nothing for {RECORDER_PATIENCE:g} s and is more "
-                    f"than {T.RECORDER_LAG} ticks behind tick {k}: going on without waiting "
-                    f"for it (its bag may lack ticks: run_graph says so)")
+        if not self.pace.behind(k):
+            self.pace.hold_until(k, now)  # goes out (and ends a hold)
             return False
         n = self.recorded_sub.get_publisher_count()
         if n != self.recorders:
             # One left (closed, or dropped by its peers when its lease ran out), or one
             # joined (it records nothing while this tick is held, so says nothing): wait
-            # for nobody until the next word of a recorder.
+            # for nobody until the next word of a recorder. Asked before the recorder's
+            # silence is judged: a killed recorder's lease and the sim's patience with a
+            # silent one are both 5 s, and the one that has left is not "given up on".
             self.log.info(f"a recorder {'joined' if n > self.recorders else 'left'} the "
                           f"graph at tick {k} ({n} now): lockstep waits for the "
                           f"recorders' next word")
             self.pace.forget(now)
             self.recorders = n
+            return False
+        gave_up, left = self.pace.gave_up, self.pace.left
+        until = self.pace.hold_until(k, now, lambda: self.liveness.alive(RECORDER_NODE),
+                                     self.params.sim.lockstep_timeout)
+        if until is None:
+            if self.pace.left > left:
+                self.log.info(f"a recorder left the graph at tick {k} (its node is gone): "
+                              f"lockstep waits for the recorders' next word")
+            elif self.pace.gave_up > gave_up:
+                self.log.warning(
+                    f"the recorder has said nothing for {now - self.pace.heard_at:.1f} s "
+                    f"and is more than {T.RECORDER_LAG} ticks behind tick {k}: going on "
+                    f"without waiting for it (its bag may lack ticks: run_graph says so)")
             return False
         self.loop.set_deadline(min(until, now + RECORDER_LOOK), self._send)
         return True
@@ -595,8 +646,16 @@ class SimNode(Node):
             self._send()
 
     def _on_timeout(self) -> None:
-        """Lockstep: no command for the current tick in time."""
-        self.ticks.timeout()
+        """Lockstep: no command for the current tick yet: wait on while the controller in
+        charge and the trajectory generator live (up to sim.lockstep_timeout), else a missed
+        tick."""
+        m = self.ticks
+        again = m.waiting(time.monotonic(),
+                          self.liveness.alive(node_of(m.in_charge), TRAJECTORY_NODE))
+        if again is not None:
+            self.loop.set_deadline(again, self._on_timeout)
+            return
+        m.timeout()
         self._send()
 
     def _on_period_end(self) -> None:
@@ -617,10 +676,10 @@ class SimNode(Node):
         if now >= self.next_look:
             self.next_look = now + LOOK_PERIOD
             self.clock_wanted = self.pub[T.CLOCK].get_subscription_count() > 0
-            if self.channel is not None:
-                self.after_send.append(self._serve_channel)
-        elif self.state_checks:
-            self.after_send.append(self._serve_channel)
+            if self.channel.server is not None:
+                self.after_send.append(self.channel.serve)
+        elif self.channel.busy:
+            self.after_send.append(self.channel.serve)
         if self.controller_params.pending:
             self.after_send.append(self.controller_params.poll)
         if self.switch_to and tick * self.period >= self.switch_at - 1e-12:
@@ -633,7 +692,7 @@ class SimNode(Node):
         """Announce the new controller in charge (once the tick is out: the controllers go
         by the states' frame_id, the recorder by the first state naming the new one)."""
         self.after_send.append(self._announce)
-        if new not in engine_names():
+        if self.joined(new):
             self.controller_params.read(new, tick)
 
     def ready(self, tick: int) -> None:
@@ -642,97 +701,6 @@ class SimNode(Node):
         if self.announcer.pending:  # most ticks have nothing to announce
             self.after_send.append(lambda: self.announcer.flush(tick))
         self._prepare()
-
-    # ------------------------------------------------------------------ local switch channel
-    def _serve_channel(self) -> None:
-        """Take `hexapod switch` requests (at a tick boundary): check the target controller's
-        lifecycle state, then set run.controller as a ROS client would."""
-        assert self.channel is not None
-        if self.state_checks:
-            now = time.monotonic()
-            waiting = []
-            for to, addr, future, until in self.state_checks:
-                if future.done():
-                    self._switch_checked(to, addr, future)
-                elif now > until:  # a request lost before the service matched: say so
-                    self.channel.reply(addr, f"error {to}_controller did not answer its "
-                                             f"get_state within {STATE_CHECK_TIMEOUT:g} s")
-                else:
-                    waiting.append((to, addr, future, until))
-            self.state_checks = waiting
-        for text, addr in self.channel.poll():
-            parts = text.split()
-            if len(parts) != 2 or parts[0] != "switch":
-                self.channel.reply(addr, f"error unknown request {text[:60]!r} "
-                                         f"(expected 'switch NAME')")
-                continue
-            to = parts[1]
-            try:
-                check_name(to)
-            except ParameterError as err:
-                self.channel.reply(addr, f"error {err}")
-                continue
-            if to == self.ticks.in_charge and self.ticks.pending_controller is None:
-                self.channel.reply(addr, f"ok {to} already in charge")
-                continue
-            node = node_of(to)
-            if node not in self.get_node_names():
-                self.channel.reply(addr, "error " + self.controller_unready(to))
-            elif to in engine_names() or self._lifecycle(node):
-                self._ask_state(to, addr)  # a lifecycle node: active first
-            else:  # a plain node: present, subscribed and matched (run.controller's check)
-                self._set_controller(to, addr)
-
-    def _state_client(self, name: str) -> Any:
-        """The (kept) client of controller node ``name``'s lifecycle get_state service."""
-        from lifecycle_msgs.srv import GetState
-
-        client = self.state_clients.get(name)
-        if client is None:
-            client = self.state_clients[name] = self.create_client(GetState,
-                                                                   f"/{name}/get_state")
-            self.loop.refresh()
-        return client
-
-    def _ask_state(self, to: str, addr: str) -> None:
-        from lifecycle_msgs.srv import GetState
-
-        name = node_of(to)
-        client = self._state_client(name)
-        if not client.service_is_ready():
-            assert self.channel is not None
-            self.channel.reply(addr, f"error controller node {name} is not running on "
-                                     f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
-                                     f"(no /{name}/get_state yet): try again")
-            return
-        self.state_checks.append((to, addr, client.call_async(GetState.Request()),
-                                  time.monotonic() + STATE_CHECK_TIMEOUT))
-
-    def _switch_checked(self, to: str, addr: str, future: Any) -> None:
-        assert self.channel is not None
-        res = future.result()
-        state = res.current_state.label if res is not None else "not answering"
-        if state != "active":
-            self.channel.reply(addr, f"error {node_of(to)} is {state}: not active")
-            return
-        self._set_controller(to, addr, state_checked=True)
-
-    def _set_controller(self, to: str, addr: str, state_checked: bool = False) -> None:
-        """Set run.controller = ``to`` (its checks) and answer the switch request. A node
-        taken for a plain one whose lifecycle services were discovered meanwhile (they are
-        announced one by one) has its state asked first, as a lifecycle node would."""
-        assert self.channel is not None
-        old = self.ticks.in_charge
-        result = self.set_parameters([Parameter("run.controller", value=to)])[0]
-        if not result.successful and not state_checked and self._lifecycle(node_of(to)):
-            self._ask_state(to, addr)
-            return
-        if not result.successful:
-            self.channel.reply(addr, f"error hexapod_sim refused run.controller = {to}: "
-                                     f"{result.reason}")
-            return
-        self.log.info(f"switch to {to} requested through the local switch channel")
-        self.channel.reply(addr, f"ok switching {old} -> {to} at the next tick")
 
     # ------------------------------------------------------------------ status
     def status(self) -> C.Status:
@@ -745,11 +713,22 @@ class SimNode(Node):
             self.rtf = (k - last_tick) * self.period / (now - last_wall)
         self._rtf = (now, k)
         if not m.started:
-            level, msg = "warn", "waiting for the graph"
+            missing = self.graph_missing() if self.wait_for else []
+            level, msg = "warn", "waiting for the graph" + (
+                f" (not there yet: {'; '.join(missing)})" if missing else "")
         elif m.fallback:
             level, msg = "error", f"{m.in_charge} silent: joint damping fallback"
         elif m.silent_ticks:
             level, msg = "warn", f"{m.in_charge} silent: holding the last torque"
+        elif self.pace.holding:
+            level, msg = "warn", (f"holding tick {k} for the recorder (behind by more than "
+                                  f"{T.RECORDER_LAG} ticks)")
+        elif (self.mode == "lockstep" and not m.finished and not m.answered
+              and now - m.published_at > LIVENESS_LOOK):
+            level, msg = "warn", (
+                f"waiting {now - m.published_at:.1f} s for {m.in_charge}'s command of tick "
+                f"{k} (its nodes are alive; at most sim.lockstep_timeout = "
+                f"{self.params.sim.lockstep_timeout:g} s)")
         elif m.finished:
             level, msg = "ok", "finished"
         else:
@@ -794,17 +773,26 @@ class SimNode(Node):
 
     def _controller_nodes(self) -> str:
         """The controller nodes on the graph as this node sees them (comma list), looked up
-        again only when the set of nodes changed (a node list costs tens of microseconds)."""
+        again when the set of nodes changed or a second went by (a node list costs tens of
+        microseconds; a node's publishers are discovered after the node itself)."""
         nodes = tuple(sorted(self.get_node_names_and_namespaces()))
+        now = time.monotonic()
         cached = getattr(self, "_controllers_seen", None)
-        if cached is None or cached[0] != nodes:
-            cached = self._controllers_seen = (nodes, ",".join(controller_nodes(self)))
+        if cached is None or cached[0] != nodes or now > cached[2]:
+            cached = self._controllers_seen = (nodes, ",".join(controller_nodes(self)),
+                                               now + 1.0)
         return cached[1]
+
+    def controller_node_list(self) -> list[str]:
+        """The controller nodes on the graph as this node sees them."""
+        return [n for n in self._controller_nodes().split(",") if n]
 
     def _publish_status(self) -> None:
         m = self.ticks
-        if m.started and not m.silent_ticks and m.in_charge not in engine_names():
-            # a joined controller answering (its commands pass the guard): not an outsider
+        if (m.started and not m.silent_ticks and m.source == COMMANDED
+                and m.tick > m.switch_tick + 1 and self.joined(m.in_charge)):
+            # a joined controller whose commands passed the guard (the torque acting now is
+            # its command, not the one before the switch to it): not an outsider
             self.guard.vouch(node_of(m.in_charge))
         self._say_if_gone(m)
         self.guard.refresh()
@@ -822,7 +810,9 @@ class SimNode(Node):
                 f"{m.fallback_episodes} fallback episodes, {m.switches} switches "
                 f"({m.missed_after_switch} missed within {SWITCH_WINDOW} ticks after one), "
                 f"{m.resyncs} resyncs, {self.pace.holds} holds for the recorder "
-                f"({self.pace.held_s:.2f} s); round trip median {m.latency_ms(0.5):.2f} ms, p99 "
+                f"({self.pace.held_s:.2f} s), {m.long_waits} long waits for a living "
+                f"controller (longest {m.longest_wait:.2f} s; {m.cap_hits} at the cap); "
+                f"round trip median {m.latency_ms(0.5):.2f} ms, p99 "
                 f"{m.latency_ms(0.99):.2f} ms; wall {wall:.2f} s, real-time factor {rtf:.3f}; "
                 f"{m.foreign} commands from a controller not in charge; inputs: "
                 f"{self.guard.summary()}")
@@ -837,7 +827,8 @@ class SimNode(Node):
         g = self.guard
         doc = self.ticks.summary_doc() | self.pace.as_dict() | {
             "dropped": {f"{t} ({c})": n for (t, c), n in g.drops.counts.items()},
-            "outside_publishers": {t: sorted(n) for t, n in g.outsiders.items()}}
+            "outside_publishers": {t: sorted(n) for t, n in g.outsiders.items()},
+            "authentication": "off" if g.key is None else "on"}
         record = self.ticks.physics.ground_record()
         if record is not None:  # seed, spread, touchdowns and the factors the feet used
             doc["ground"] = record.as_dict() | {"overflowed": record.overflowed}
@@ -871,8 +862,7 @@ def _finish(node: SimNode, code: int) -> int:
     except OSError as err:
         node.log.error(f"cannot write the summary to {node.summary_path}: {err}")
     node.flush()
-    if node.channel is not None:
-        node.channel.close()
+    node.channel.close()
     return code
 
 

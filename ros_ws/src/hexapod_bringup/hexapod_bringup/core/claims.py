@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping, Sequence
 
-from .convergence import TRACKING, Convergence
+from .convergence import STATIONARY_TRACKING, TRACKING, Convergence
 from hexapod_metrics.core.indices import REPORTED_NAMES
 
 #: C3: "large degradation" = the summed tracking errors at least this many times the
@@ -135,6 +135,10 @@ class Verdict:
     #: the comparisons decided against the claim, and those left undecided
     against: tuple[str, ...] = ()
     open: tuple[str, ...] = ()
+    #: the same rule decided on each gait cycle alone (core/windows.py), on the paper's
+    #: indices and on the stationary ones ('' where not decided so)
+    windows: str = ""
+    stationary: str = ""
 
     @property
     def holds(self) -> bool:
@@ -158,9 +162,12 @@ def _ratio(a: Measured, b: Measured) -> Measured:
 Point = Mapping[str, Measured]  # index name -> measured value, for one case
 
 
-def c1(pd_p: Point, pd_pf: Point) -> Verdict:
-    """C1: base case, T_max 400: PD-P&F tracks hip and foot better and needs less torque."""
-    names = TRACKING + ("T_L",)
+def c1(pd_p: Point, pd_pf: Point, tracking: Sequence[str] = TRACKING) -> Verdict:
+    """C1: base case, T_max 400: PD-P&F tracks hip and foot better and needs less torque.
+
+    ``tracking``: the four tracking errors it is decided on (the paper's, or
+    STATIONARY_TRACKING), here and in c2-c4."""
+    names = tuple(tracking) + ("T_L",)
     cmp = {n: less(pd_pf[n], pd_p[n]) for n in names}
     ev = "; ".join(f"{n} {pd_pf[n].text()} vs {pd_p[n].text()} ({status_of(cmp[n])})"
                    for n in names)
@@ -177,8 +184,8 @@ def _listed(cmp: Mapping[str, Tri], want: Tri, a: Point, b: Point) -> tuple[str,
                  if r is want)
 
 
-def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[float]
-       ) -> Verdict:
+def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[float],
+       tracking: Sequence[str] = TRACKING) -> Verdict:
     """C2: over the ground sweep at each T_max, PD-P&F's hip and foot errors below PD-P's.
 
     ``sweeps[t_max][controller][k]`` is the point at ground ``values[k]`` (a scale).
@@ -187,7 +194,7 @@ def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[f
     against: list[str] = []
     undecided: list[str] = []
     for t_max, by_c in sweeps.items():
-        for n in TRACKING:
+        for n in tracking:
             cmp = [less(a[n], b[n]) for a, b in zip(by_c["pd_pf"], by_c["pd_p"])]
             results += cmp
             for v, r, a, b in zip(values, cmp, by_c["pd_pf"], by_c["pd_p"]):
@@ -210,14 +217,16 @@ def c2(sweeps: Mapping[float, Mapping[str, Sequence[Point]]], values: Sequence[f
                    tuple(against), tuple(undecided))
 
 
-def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float) -> Verdict:
+def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float,
+       tracking: Sequence[str] = TRACKING) -> Verdict:
     """C3: T_max < 160: large degradation of the indices for both controllers."""
-    ratios = {c: _ratio(total([strong[c][n] for n in TRACKING]),
-                        total([base[c][n] for n in TRACKING])) for c in base}
-    cmp = {c: (True if strong[c]["eps_xH"].diverged and strong[c]["eps_xH"].converged
+    ratios = {c: _ratio(total([strong[c][n] for n in tracking]),
+                        total([base[c][n] for n in tracking])) for c in base}
+    cmp = {c: (True if strong[c][tracking[0]].diverged and strong[c][tracking[0]].converged
                else at_least(r, C3_FACTOR)) for c, r in ratios.items()}
-    ev = "; ".join(f"{c}: tracking errors x{r.text(3)} (eps_xH {strong[c]['eps_xH'].text()} "
-                   f"vs {base[c]['eps_xH'].text()} m)" for c, r in ratios.items())
+    x = tracking[0]
+    ev = "; ".join(f"{c}: tracking errors x{r.text(3)} ({x} {strong[c][x].text()} "
+                   f"vs {base[c][x].text()} m)" for c, r in ratios.items())
     return Verdict("C3", "T_max < 160: large degradation of the indices for both controllers",
                    status_of(all3(cmp.values())),
                    f"at T_max {t_max:g} the summed tracking errors are >= {C3_FACTOR:g}x "
@@ -229,7 +238,8 @@ def c3(strong: Mapping[str, Point], base: Mapping[str, Point], t_max: float) -> 
 
 def c4(ideal: Mapping[float, Mapping[str, Point]],
        torque_step: Mapping[float, Mapping[str, Measured]],
-       impact: Mapping[float, Mapping[str, Measured]] | None = None) -> Verdict:
+       impact: Mapping[float, Mapping[str, Measured]] | None = None,
+       tracking: Sequence[str] = TRACKING) -> Verdict:
     """C4: T_max -> inf: PD-P&F shows stability problems on ground harder than the base.
 
     ``ideal[scale][controller]`` are the points of a ground sweep at T_max = inf that
@@ -240,15 +250,16 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
     torque step (whose samples' differences grow as dt shrinks) is only reported.
     """
     if impact is not None:
-        return _c4_impact(ideal, torque_step, impact)
+        return _c4_impact(ideal, torque_step, impact, tracking)
+    xh, yh = tracking[0], tracking[1]
     scales = sorted(ideal)
     hard = [s for s in scales if s > 1.0]
     base = ideal[min(scales, key=lambda s: abs(s - 1.0))]["pd_pf"]
-    err_base = total([base["eps_xH"], base["eps_yH"]])
+    err_base = total([base[xh], base[yh]])
     signs: list[Tri] = []
-    diverged = [s for s in hard if ideal[s]["pd_pf"]["eps_xH"].diverged]
-    signs += [True if ideal[s]["pd_pf"]["eps_xH"].converged else None for s in diverged]
-    growth = {s: _ratio(total([ideal[s]["pd_pf"]["eps_xH"], ideal[s]["pd_pf"]["eps_yH"]]),
+    diverged = [s for s in hard if ideal[s]["pd_pf"][xh].diverged]
+    signs += [True if ideal[s]["pd_pf"][xh].converged else None for s in diverged]
+    growth = {s: _ratio(total([ideal[s]["pd_pf"][xh], ideal[s]["pd_pf"][yh]]),
                         err_base) for s in hard if s not in diverged}
     steps = {s: _ratio(torque_step[s]["pd_pf"], torque_step[s]["pd_p"]) for s in hard
              if s in torque_step}
@@ -275,16 +286,18 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
 
 def _c4_impact(ideal: Mapping[float, Mapping[str, Point]],
                torque_step: Mapping[float, Mapping[str, Measured]],
-               impact: Mapping[float, Mapping[str, Measured]]) -> Verdict:
+               impact: Mapping[float, Mapping[str, Measured]],
+               tracking: Sequence[str] = TRACKING) -> Verdict:
     """C4 with the impact torque deciding the torque-impulse sign (see :func:`c4`)."""
+    xh, yh = tracking[0], tracking[1]
     scales = sorted(ideal)
     hard = [s for s in scales if s > 1.0]
     base = ideal[min(scales, key=lambda s: abs(s - 1.0))]["pd_pf"]
-    err_base = total([base["eps_xH"], base["eps_yH"]])
+    err_base = total([base[xh], base[yh]])
     signs: list[Tri] = []
-    diverged = [s for s in hard if ideal[s]["pd_pf"]["eps_xH"].diverged]
-    signs += [True if ideal[s]["pd_pf"]["eps_xH"].converged else None for s in diverged]
-    growth = {s: _ratio(total([ideal[s]["pd_pf"]["eps_xH"], ideal[s]["pd_pf"]["eps_yH"]]),
+    diverged = [s for s in hard if ideal[s]["pd_pf"][xh].diverged]
+    signs += [True if ideal[s]["pd_pf"][xh].converged else None for s in diverged]
+    growth = {s: _ratio(total([ideal[s]["pd_pf"][xh], ideal[s]["pd_pf"][yh]]),
                         err_base) for s in hard if s not in diverged}
     peaks = {s: _ratio(impact[s]["pd_pf"], impact[s]["pd_p"]) for s in hard if s in impact}
     steps = {s: _ratio(torque_step[s]["pd_pf"], torque_step[s]["pd_p"]) for s in hard
@@ -319,6 +332,6 @@ def point(conv: Convergence) -> dict[str, Measured]:
     return {n: Measured.of(conv, n) for n in REPORTED_NAMES}
 
 
-__all__ = ["C3_FACTOR", "C4_FACTOR", "FAILS", "HOLDS", "Measured", "Point", "TRACKING",
-           "UNDECIDED", "Verdict", "all3", "any3", "at_least", "c1", "c2", "c3", "c4", "total",
-           "less", "point", "status_of"]
+__all__ = ["C3_FACTOR", "C4_FACTOR", "FAILS", "HOLDS", "Measured", "Point",
+           "STATIONARY_TRACKING", "TRACKING", "UNDECIDED", "Verdict", "all3", "any3",
+           "at_least", "c1", "c2", "c3", "c4", "total", "less", "point", "status_of"]

@@ -1,6 +1,6 @@
 """E5 by CMA-ES: the gains that minimise the hip errors, found without a grid.
 
-Same objective as the grid tuner (experiments.tune): eps_xH + eps_yH (m) over the
+Same objective as the grid tuner (experiments.tune): trk_xH + eps_yH (m) over the
 evaluation window; diverged and non-walking runs are rejected (they get
 :data:`REJECTED_SCORE`, worse than any walking set, so CMA-ES ranks them last).
 

@@ -13,7 +13,7 @@ Runs are single in-process runs (closed_loop.run), one task each on a backend
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -22,6 +22,7 @@ from hexapod_common.core.params import HexapodParams
 from hexapod_metrics.core.indices import REPORTED_NAMES
 from hexapod_sim.core.uneven_ground import GroundDraws, check_seed, check_spread, pairs_for
 
+from .experiments import HIP_OBJECTIVE
 from .parallel import Backend, InlineBackend
 from .simulate import Simulation, simulate
 from .stats import Interval, mean_interval, paired_interval
@@ -73,10 +74,19 @@ class McRun:
     status: str
     indices: dict[str, float] | None
     ground: dict[str, Any]
+    cycles: tuple[dict[str, float] | None, ...] = ()
+    """Every full gait cycle's indices (None where it was not a walk; none if diverged)."""
 
     def value(self, name: str) -> float:
         """Index ``name``, NaN if the run diverged."""
         return math.nan if self.indices is None else self.indices[name]
+
+    def at_cycle(self, k: int) -> "McRun":
+        """The same run scored on gait cycle ``k`` alone (no indices where it has none)."""
+        ix = self.cycles[k] if 0 <= k < len(self.cycles) else None
+        status = "ok" if ix is not None else ("diverged" if self.status == "diverged"
+                                              else "fallen")
+        return McRun(self.controller, self.seed, status, ix, self.ground, self.cycles)
 
 
 def run_task(task: McTask) -> McRun:
@@ -86,7 +96,8 @@ def run_task(task: McTask) -> McRun:
     rec = sim.run.ground
     assert rec is not None
     idx = sim.indices.as_dict() if sim.indices is not None else None
-    return McRun(task.controller, task.seed, sim.outcome.status, idx, rec.as_dict())
+    cycles = tuple(c.as_dict() if c is not None else None for c in sim.outcome.cycles)
+    return McRun(task.controller, task.seed, sim.outcome.status, idx, rec.as_dict(), cycles)
 
 
 @dataclass(frozen=True)
@@ -114,6 +125,10 @@ class MonteCarloResult:
     def difference(self, a: str, b: str, name: str) -> Interval:
         """Paired difference b - a of index ``name`` over the seeds where both walked."""
         return paired_interval(self.values(a, name), self.values(b, name), self.level)
+
+    def at_cycle(self, k: int) -> "MonteCarloResult":
+        """The same runs scored on gait cycle ``k`` alone (McRun.at_cycle)."""
+        return replace(self, runs={c: [r.at_cycle(k) for r in v] for c, v in self.runs.items()})
 
     def diverged(self, controller: str) -> int:
         """Seeds on which ``controller`` diverged."""
@@ -169,8 +184,8 @@ def monte_carlo(p: HexapodParams, controllers: Sequence[str], seeds: Sequence[in
 
 # -- E8: which controller wins on uneven ground ---------------------------------------
 
-#: E8's deciding number: the hip errors eps_xH + eps_yH (m), E5's objective.
-HIP = ("eps_xH", "eps_yH")
+#: E8's deciding number: the stationary hip errors trk_xH + eps_yH (m), E5's objective.
+HIP = HIP_OBJECTIVE
 
 
 @dataclass(frozen=True)
@@ -186,7 +201,7 @@ class Decision:
 
 
 def hip_errors(res: MonteCarloResult, controller: str) -> np.ndarray:
-    """eps_xH + eps_yH of ``controller`` per seed (m; NaN where diverged)."""
+    """trk_xH + eps_yH of ``controller`` per seed (m; NaN where diverged)."""
     total: np.ndarray = res.values(controller, HIP[0]) + res.values(controller, HIP[1])
     return total
 

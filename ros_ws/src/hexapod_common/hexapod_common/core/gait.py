@@ -19,7 +19,7 @@ from functools import lru_cache
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
-from numba import njit
+from .jit import njit
 
 from .errors import UnreachableTargetError
 from .kinematics import N_LEGS, ik_with_rates

@@ -14,7 +14,7 @@ engine's inner loop, the trajectory generator and the controllers share one impl
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .jit import njit
 
 from .errors import UnreachableTargetError
 from .robot import N_LEGS
@@ -33,13 +33,13 @@ def foot_offset(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
     return foot_offset_cs(np.cos(th1), np.sin(th1), np.cos(a), np.sin(a), l1, l2)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def foot_offset_cs(c1, s1, c12, s12, l1, l2):  # type: ignore[no-untyped-def]
     """Foot minus hip (m) from cos/sin of theta1 and of theta1 + theta2."""
     return l1 * s1 + l2 * s12, -l1 * c1 - l2 * c12
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2):  # type: ignore[no-untyped-def]
     """Foot velocity relative to the hip (m/s): J_F,theta dtheta = -J dtheta."""
     w12 = w1 + w2
@@ -53,7 +53,7 @@ def psi(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
     return -dx, -dy
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def psi_jacobian(th1, th2, l1, l2):  # type: ignore[no-untyped-def]
     """J = dPsi/dtheta as (J11, J12, J21, J22), paper eq. (4c)."""
     a = th1 + th2
@@ -69,7 +69,7 @@ def joint_rates(th1, th2, vx, vy, l1, l2):  # type: ignore[no-untyped-def]
     return (j22 * vx - j12 * vy) / det, (-j21 * vx + j11 * vy) / det
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def foot_force_torque(th1, th2, fx, fy, l1, l2):  # type: ignore[no-untyped-def]
     """Joint torques (N m) produced by a force F (N) at the foot: theta rows of J_F^T F.
 

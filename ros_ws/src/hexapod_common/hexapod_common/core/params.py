@@ -26,16 +26,18 @@ import re
 from dataclasses import dataclass, field, fields, replace
 from functools import lru_cache
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, Mapping
 
 import yaml
 
+from .controller_names import ENGINE_CONTROLLERS
 from .errors import ParameterError, ParamsFileError
 from .robot import N_LEGS
 
 #: The built-in controllers with a compiled law (the ROS graph's controller nodes). Every
 #: registered controller (:func:`controller_names`) is accepted by ``run.controller``.
-CONTROLLERS = ("pd_p", "pd_pf")
+CONTROLLERS = ENGINE_CONTROLLERS
 #: Python entry-point group of controller plug-ins (``name = module:Class``).
 CONTROLLER_GROUP = "hexapod.controllers"
 MODES = ("lockstep", "realtime")
@@ -170,8 +172,9 @@ class SimParams:
                          "also takes the ground dampers at the end-of-step velocity", INTEGRATORS)
     control_period: float = _f("control period, a multiple of dt (s)", 0.0, 0.1, lo_open=True)
     mode: str = _s("graph mode", MODES)
-    lockstep_timeout: float = _f("lockstep: wall time to wait for a command before a missed "
-                                 "tick (s)", 0.0, 60.0, lo_open=True)
+    lockstep_timeout: float = _f("lockstep: most wall time a tick waits for the command of a "
+                                 "controller that is alive (s; one whose node has left: "
+                                 "0.5 s), then a missed tick", 0.0, 3600.0, lo_open=True)
     lockstep_max_rtf: float = _f("lockstep: at most this many sim s per wall s, e.g. 1 to "
                                  "watch a run at real time (0: as fast as the graph goes)",
                                  0.0, 1e6)
@@ -187,7 +190,9 @@ class RunParams:
     controller: str = field(metadata={"spec": Spec(
         str, "controller in charge: a registered name (`hexapod controllers`) or "
         "module:Class")})
-    duration: float = _f("simulated duration (s)", 0.0, 1e6, lo_open=True)
+    duration: float = _f("simulated duration (s); 0: until stopped (a graph run of "
+                         "run_graph.sh --duration 0; the engine needs at least "
+                         "run.eval_cycles gait cycles)", 0.0, 1e6)
     eval_cycles: int = _i("gait cycles at the end of the run that the indices cover", 1, 1000)
 
 
@@ -272,6 +277,7 @@ def register_controller_group(name: str, params_type: type, alias: str | None = 
         if not isinstance(f.metadata.get("spec"), Spec):
             raise TypeError(f"controller {name!r}: parameter {f.name!r} of "
                             f"{params_type.__name__} has no Spec (use controller_api.param)")
+        _settle_kind(name, f)
     if _CONTROLLER_GROUPS.get(name, params_type) is not params_type:
         raise ParameterError("run.controller", name, "one class per controller name "
                              f"({name!r} is already {_CONTROLLER_GROUPS[name].__name__}'s)")
@@ -279,6 +285,31 @@ def register_controller_group(name: str, params_type: type, alias: str | None = 
     if alias:
         _CONTROLLER_ALIASES[alias] = name
     SPECS.refresh()
+
+
+#: Field metadata key: the Spec's kind was not given (controller_api.param), so it is the
+#: field's annotation, settled at registration (:func:`_settle_kind`).
+KIND_INFERRED = "kind_inferred"
+_KINDS = {"float": float, "int": int, "bool": bool, "str": str}
+
+
+def _settle_kind(controller: str, f: Any) -> None:
+    """Give a controller parameter declared without ``kind`` its annotation's kind
+    (``warmup: int``: whole numbers only) and check its default against it (TypeError,
+    one line, naming the controller and the parameter)."""
+    spec: Spec = f.metadata["spec"]
+    if f.metadata.get(KIND_INFERRED):
+        annotation = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+        kind = _KINDS.get(annotation, spec.kind)
+        if kind is not spec.kind:
+            spec = replace(spec, kind=kind)
+            f.metadata = MappingProxyType({**f.metadata, "spec": spec, KIND_INFERRED: False})
+    try:
+        if spec.default is not None:  # the built-ins' come from the params file
+            check_spec(f"{controller}.{f.name}", spec, spec.default)
+    except ParameterError as err:
+        raise TypeError(f"controller {controller!r}: the default of parameter {f.name!r} "
+                        f"does not fit it: {err}") from None
 
 
 def unregister_controller_group(name: str) -> None:
@@ -512,18 +543,71 @@ def check_value(name: str, value: Any) -> Any:
     return check_spec(name, spec, value)
 
 
+def as_kind(name: str, value: Any, text: bool = False) -> Any:
+    """``value`` in the type of parameter ``name`` where it is the same number in the other
+    numeric type: an int for a float parameter is that float, an integral float for an int
+    parameter that int; with ``text``, a string that reads as a number (:func:`read_number`:
+    ``1e6``, ``.inf``) for a numeric parameter is that number. Anything else (a bool, another
+    string, an unknown name) is returned as it is, for :func:`check_value` to judge. For the
+    ROS side, which stores what it is sent: ``ros2 param set NODE ground.k_y 1000000`` sends
+    an integer, ``... 1e6`` the string ``'1e6'`` (it reads its text as YAML 1.1)."""
+    spec = SPECS.get(name)
+    if spec is None or isinstance(value, bool):
+        return value
+    if text and isinstance(value, str) and spec.kind in (int, float):
+        try:
+            value = read_number(value)
+        except ValueError:
+            return value
+    if spec.kind is float and isinstance(value, int):
+        return float(value)
+    if spec.kind is int and isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+#: How a type is named in messages (a value's, or the one a parameter expects).
+TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a float", str: "a string",
+              list: "a list", dict: "a mapping", type(None): "no value"}
+
+
+def wrong_type(name: str, spec: Spec, value: Any) -> ParameterError:
+    """The error for a value of the wrong type: the parameter, the value, the allowed values
+    and what was expected instead of what came (``parameter 'ground.k_y' = 'soft' is
+    invalid: allowed float in [0, 1e+12] (a string, where a float is expected)``)."""
+    found = TYPE_NAMES.get(type(value), f"a {type(value).__name__}")
+    return ParameterError(name, value, f"{spec.allowed()} ({found}, where "
+                                       f"{TYPE_NAMES[spec.kind]} is expected)")
+
+
+def read_number(text: str) -> float:
+    """A number written as text, read like the params file reads it (``1e6``, ``.inf``,
+    ``inf``); raises ValueError if it is not one."""
+    try:
+        value = parse_yaml(text) if text.strip() else None
+    except yaml.YAMLError:
+        raise ValueError(text) from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if text.strip().lower() in ("inf", "+inf", "-inf", "nan"):
+            return float(text)
+        raise ValueError(text)
+    return float(value)
+
+
 def check_spec(name: str, spec: Spec, value: Any) -> Any:
     """``value`` checked against ``spec`` (ParameterError naming ``name``), converted."""
     if spec.kind is bool:
         if not isinstance(value, bool):
-            raise ParameterError(name, value, spec.allowed())
+            raise wrong_type(name, spec, value)
         return value
     if spec.kind is str:
-        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
+        if not isinstance(value, str):
+            raise wrong_type(name, spec, value)
+        if spec.choices and value not in spec.choices:
             raise ParameterError(name, value, spec.allowed())
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(name, value, spec.allowed())
+        raise wrong_type(name, spec, value)
     if spec.kind is int:
         if isinstance(value, float) and not value.is_integer():
             raise ParameterError(name, value, spec.allowed())
@@ -722,6 +806,11 @@ NODE_PARAMS: dict[str, dict[str, Spec]] = {
     },
 }
 COMMON_NODE_PARAMS = ("use_sim_time",)
+#: What rcl and rclpy declare on every node, found in a `ros2 param dump`: accepted in a
+#: params file and left to rcl (not passed on: each node declares its own).
+ROS_OWN_PARAMS = ("start_type_description_service",)
+#: rclpy's QoS overrides group (``qos_overrides./topic.publisher.depth``): left to rclpy.
+QOS_OVERRIDES = "qos_overrides"
 
 
 class YamlLoader(yaml.SafeLoader):  # type: ignore[misc]  # PyYAML ships no types
@@ -772,6 +861,8 @@ def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, A
     own = _node_param_names()
     for key, value in tree.items():
         key = str(key)
+        if key in ROS_OWN_PARAMS or key == QOS_OVERRIDES:
+            continue
         if key in _GROUP_TYPES:
             if not isinstance(value, Mapping):
                 raise ParamsFileError(
@@ -803,6 +894,11 @@ def _flatten(path: Path, section: str, tree: Mapping[str, Any], out: dict[str, A
                                   f"'{section}'{hint}")
 
 
+def _node_table(node: str) -> dict[str, Spec]:
+    """The node parameters of node ``node`` (a plug-in's node: a controller node's)."""
+    return NODE_PARAMS.get(node) or NODE_PARAMS["pd_p_controller"]
+
+
 def _check_node_value(path: Path, section: str, key: str, value: Any) -> None:
     """A node parameter in a params file: known to the section's node (to some node under
     ``/**``) and valid for every node that has it."""
@@ -811,12 +907,12 @@ def _check_node_value(path: Path, section: str, key: str, value: Any) -> None:
               [n for n, table in NODE_PARAMS.items() if key in table])
     if key in COMMON_NODE_PARAMS:
         return
-    if section != "/**" and key not in NODE_PARAMS[node]:
+    if section != "/**" and key not in _node_table(node):
         raise ParamsFileError(f"params file {path}: '{key}' is not a parameter of node "
-                              f"'{node}'" + nearest(key, NODE_PARAMS[node]))
+                              f"'{node}'" + nearest(key, _node_table(node)))
     for owner in owners:
         try:
-            check_spec(key, NODE_PARAMS[owner][key], value)
+            check_spec(key, _node_table(owner)[key], value)
         except ParameterError as err:
             raise ParamsFileError(f"params file {path}: node '{owner}': {err}") from None
 
@@ -842,7 +938,8 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
         raise ParamsFileError(f"params file {path} is empty: {layout}")
     if not isinstance(doc, Mapping):
         raise ParamsFileError(f"params file {path} holds {type(doc).__name__} {doc!r}: {layout}")
-    nodes = ["/**"] + list(NODE_PARAMS)
+    # a registered plug-in's node is named as the controller (a `ros2 param dump` of it)
+    nodes = ["/**"] + list(NODE_PARAMS) + [c for c in controller_names() if c not in CONTROLLERS]
     flat: dict[str, Any] = {}
     for node, body in doc.items():
         name = str(node).lstrip("/") if str(node) != "/**" else "/**"
@@ -859,14 +956,26 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
     return flat
 
 
+def _dump_only(path: Path) -> bool:
+    """Whether the params file at ``path`` has node sections only (no ``/**``)."""
+    doc = parse_yaml(path.read_text())
+    return isinstance(doc, Mapping) and "/**" not in doc
+
+
 def load_params(path: str | Path | None = None, **overrides: Any) -> HexapodParams:
     """Load and validate the params file (default: the shipped base experiment).
 
+    A file of node sections only (``/hexapod_sim: ros__parameters: ...``: a `ros2 param
+    dump` of one or more nodes) holds what those nodes declare (the sim no controller
+    gains): the shipped base experiment's values fill in the rest. A ``/**`` section must be
+    complete (a missing parameter is named).
     ``overrides`` use dotted names with '.' replaced by '__' (``ground__scale=2.0``) or can be
     given as a dict via ``load_params(path, **{"ground.scale": 2.0})``.
     """
     flat = read_params_file(path or default_params_path())
     known = {k: v for k, v in flat.items() if k in SPECS}  # the rest: node parameters
+    if path is not None and set(SPECS) - set(known) and _dump_only(Path(path)):
+        known = {**_base_flat(), **known}
     for name, value in overrides.items():
         name = name.replace("__", ".")
         if name not in SPECS:
@@ -881,7 +990,9 @@ __all__ = [
     "register_controller_group", "registered_controllers", "unknown_controller",
     "unregister_controller_group",
     "GaitParams", "GroundParams", "HexapodParams", "INTEGRATORS", "MODES", "NODE_PARAMS",
-    "N_LEGS", "RobotParams", "RunParams", "SPECS", "SimParams", "Spec", "YamlLoader",
-    "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",
-    "load_params", "nearest", "parse_yaml", "read_params_file", "unknown_parameter", "validate",
+    "N_LEGS", "QOS_OVERRIDES", "ROS_OWN_PARAMS", "RobotParams", "RunParams", "SPECS",
+    "SimParams", "Spec", "YamlLoader",
+    "as_kind", "check_controller", "check_spec", "check_value", "default_params_path", "from_flat",
+    "load_params", "nearest", "parse_yaml", "read_number", "read_params_file", "unknown_parameter",
+    "validate", "wrong_type",
 ]

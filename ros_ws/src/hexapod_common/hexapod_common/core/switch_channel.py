@@ -1,13 +1,17 @@
-"""A private local channel to the running sim, so that `hexapod switch` needs no ROS context.
+"""A private local channel to the running sim, so that `hexapod switch` and `hexapod status`
+need no ROS context.
 
-A new DDS participant per switch cost 1-4 s and, while the graph's nodes discovered it,
-about 10 % of the realtime ticks. Instead the sim listens on a UNIX datagram socket,
+A new DDS participant per call cost 1-4 s (rclpy's start, discovery, service matching: 2.7-6.4 s
+for a status on a busy machine) and, while the graph's nodes discovered it, about 10 % of the
+realtime ticks. Instead the sim listens on a UNIX datagram socket,
 ``<runtime dir>/sim-<ROS_DOMAIN_ID>.sock``; the runtime dir is ``$XDG_RUNTIME_DIR/hexapod``
 or ``/tmp/hexapod-<uid>``, created with mode 0700 and refused unless it belongs to this user
 with that mode and is no symlink (as tmux does), so only this user's processes can send a
-request. One request, one datagram: ``switch pd_p``; one answer: ``ok <text>`` or
-``error <text>``. The sim takes requests at its tick boundaries and runs them through the
-same parameter checks as a ``run.controller`` set over ROS. ROS-free.
+request. One request, one datagram: ``switch pd_p`` or ``status``; one answer: ``ok <text>`` or
+``error <text>`` (a status: ``ok <JSON>``, up to :data:`MAX_REPLY` bytes). The sim takes
+requests at its tick boundaries (and while no tick goes out, every 50 ms) and runs a switch
+through the same parameter checks as a ``run.controller`` set over ROS
+(hexapod_sim/channel_service.py). ROS-free.
 """
 from __future__ import annotations
 
@@ -20,6 +24,8 @@ from pathlib import Path
 from .errors import HexapodError
 
 MAX_DATAGRAM = 4096
+#: Longest answer (bytes): a status with every node, drop count and outside publisher.
+MAX_REPLY = 65536
 
 
 class ChannelError(HexapodError):
@@ -96,8 +102,11 @@ class SwitchServer:
         """Answer one request (a client that has gone is ignored)."""
         if not addr:
             return
+        data = text.encode()
+        if len(data) > MAX_REPLY:
+            data = f"error the answer is {len(data)} bytes, over {MAX_REPLY}".encode()
         try:
-            self.sock.sendto(text.encode(), addr)
+            self.sock.sendto(data, addr)
         except OSError:
             pass
 
@@ -124,7 +133,7 @@ def request(text: str, domain_id: str | int, timeout: float) -> str | None:
             return None  # a stale socket: no sim there
         sock.settimeout(timeout)
         try:
-            data = sock.recv(MAX_DATAGRAM)
+            data = sock.recv(MAX_REPLY)
         except TimeoutError as err:
             raise ChannelError(f"the sim on ROS_DOMAIN_ID={domain_id} did not answer within "
                                f"{timeout:g} s") from err

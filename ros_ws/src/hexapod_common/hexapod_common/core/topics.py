@@ -19,21 +19,9 @@ from .layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, COMMAND_SHAPE, O_
                      O_HF, O_HP, O_HV, O_TH, O_THV, O_TQ)
 from .params import N_LEGS
 
-JOINT_STATES = "/hexapod/joint_states"
-FOOT_FORCES = "/hexapod/foot_forces"
-HIP_STATES = "/hexapod/hip_states"
-REFERENCE = "/hexapod/reference"
-JOINT_COMMANDS = "/hexapod/joint_commands"
-ACTIVE_CONTROLLER = "/hexapod/active_controller"
-INDICES = "/hexapod/indices"
-STATUS = "/hexapod/status"
-CLOCK = "/clock"
-MARKERS = "/hexapod/markers"
-#: Parameter records (core/param_log.py): each node's start values and changes, transient-local.
-PARAMETERS = "/hexapod/parameters"
-#: The recorder's progress (lockstep pacing, hexapod_sim/core/recorder_pace.py): the stamp
-#: of the newest joint state it wrote, every RECORDED_EVERY ticks. Not recorded itself.
-RECORDED = "/hexapod/recorded"
+from .topic_names import *  # noqa: F403  (the names are part of this module's contract)
+from .topic_names import (ACTIVE_CONTROLLER, CLOCK, FOOT_FORCES, HIP_STATES, INDICES,
+                          JOINT_COMMANDS, JOINT_STATES, MARKERS, PARAMETERS, REFERENCE, STATUS)
 
 #: Depth of the publishers' histories of the per-tick topics: how far (in ticks) a slow
 #: reliable reader (the recorder) may lag before the writer drops samples for it.
@@ -92,9 +80,6 @@ TOPICS: dict[str, TopicSpec] = {
 }
 #: /hexapod/recorded: a header stamp, no status (signed like every topic of the graph).
 RECORDED_SPEC = TopicSpec(DIAGNOSTIC_ARRAY, depth=10)
-#: The topics published at every control tick: the recorder cuts its chunks at the same
-#: tick of all of them (so a killed recorder truncates them all at one tick).
-TICK_TOPICS = (CLOCK, JOINT_STATES, FOOT_FORCES, HIP_STATES, REFERENCE, JOINT_COMMANDS)
 
 JOINT_NAMES = tuple(f"leg{i + 1}_{j}" for i in range(N_LEGS) for j in ("hip", "knee"))
 FOOT_NAMES = tuple(f"leg{i + 1}_foot_{a}" for i in range(N_LEGS) for a in ("x", "y"))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import fcntl
+import hashlib
 import os
 import re
 import shutil
@@ -19,17 +20,25 @@ import time
 from pathlib import Path
 from typing import IO, Iterable, Mapping
 
+from hexapod_common.core.topic_names import CLOCK, RECORDED, TICK_TOPICS
+
 #: Port queue (messages) of every graph process's shared-memory port (see below).
 PORT_QUEUE = 1024
 #: How long (ms) a sender waits for the listeners of a shared-memory port to show they are
 #: alive before declaring the port broken (Fast DDS's default: 1000). Longer than the
 #: participants' lease (:data:`LEASE_S`), so that a node killed without a goodbye is dropped
-#: by its peers before any of them declares its port broken (see below); 10 s (with a 5 s
-#: lease) made the test suite fail in 3 of 7 runs, so it stays near the default.
-HEALTHY_CHECK_MS = 3000
+#: by its peers before any of them declares its port broken (see below), and longer than a
+#: stop of a live process that lockstep waits out (a port whose listener was stopped for 3 s
+#: must not be declared broken). 10 s (with a 5 s lease, announced every 1 s) made the test
+#: suite fail in 3 of 7 runs; 6 s with 0.25 s announcements is what the suite runs.
+HEALTHY_CHECK_MS = 6000
 #: A participant's lease (s) and how often it announces itself (s): see
-#: :data:`FASTDDS_PROFILE`.
-LEASE_S = 2
+#: :data:`FASTDDS_PROFILE`. Longer than a process may be stopped (``kill -STOP``) or starved
+#: and still be waited for: lockstep waits for the living (sim_node, runtime/liveness.py),
+#: and a participant dropped by its peers loses what was sent to it meanwhile (a 2 s lease
+#: lost the recorder's samples of a 3 s stop). The launcher's nodes are known dead at once
+#: by their pid; a joined node that dies is dropped after this lease.
+LEASE_S = 5
 ANNOUNCE_S = 0.25
 
 #: Most samples a reader of the graph holds untaken. Fast DDS's default (5000) applies
@@ -56,9 +65,10 @@ READER_MAX_SAMPLES = 20000
 #: that cost the sim ~60 % of a core instead of ~44 % and 1-1.5 s of a realtime 1 kHz run at
 #: 55-80 % of ticks on time, from ~3.5 s after an idle controller's SIGKILL until its lease
 #: ended at ~4.6-4.8 s (``scripts/bench_switch.py --kill-idle 3``, two runs). So the lease
-#: is :data:`LEASE_S` = 2 s, shorter than the health check: the dead participant is dropped
-#: 1.8 s after the kill, before any watchdog fires, and no interval of those runs fell below
-#: 95 % on time (two runs, side by side with the 5 s lease). It is announced every
+#: is shorter than the health check (:data:`LEASE_S` = 5 s, :data:`HEALTHY_CHECK_MS` = 6 s;
+#: before lockstep waited for stopped processes, 2 s and 3 s): the dead participant is
+#: dropped before any watchdog fires (with 2 s and 3 s no interval of those runs fell below
+#: 95 % on time, side by side with the 5 s lease and its 3 s check). It is announced every
 #: :data:`ANNOUNCE_S` = 0.25 s, 8 times per lease: an earlier try of 1-2 s leases announced
 #: every 1 s (2 announcements per lease) made a loaded peer drop a live node twice. The
 #: more frequent announcements (one small datagram per peer every 0.25 s) showed no cost in
@@ -77,6 +87,23 @@ READER_MAX_SAMPLES = 20000
 #: signal (:class:`PortFence`), and deletes those ports once the graph is stopped; such a
 #: process skips the id (Fast DDS prints one ``Failed init_port ... open_and_lock_file
 #: failed`` line for it).
+_WRITER_BODY = """\
+      <times>
+        <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
+        <nackResponseDelay><sec>0</sec><nanosec>0</nanosec></nackResponseDelay>
+      </times>
+"""
+_READER_BODY = f"""\
+      <topic>
+        <resourceLimitsQos>
+          <max_samples>{READER_MAX_SAMPLES}</max_samples>
+          <max_samples_per_instance>{READER_MAX_SAMPLES}</max_samples_per_instance>
+        </resourceLimitsQos>
+      </topic>
+      <times>
+        <heartbeatResponseDelay><sec>0</sec><nanosec>0</nanosec></heartbeatResponseDelay>
+      </times>
+"""
 FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
 <dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <profiles>
@@ -111,25 +138,58 @@ FASTDDS_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
       </rtps>
     </participant>
     <data_writer profile_name="hexapod_writer" is_default_profile="true">
-      <times>
-        <heartbeatPeriod><sec>0</sec><nanosec>50000000</nanosec></heartbeatPeriod>
-        <nackResponseDelay><sec>0</sec><nanosec>0</nanosec></nackResponseDelay>
-      </times>
-    </data_writer>
+{_WRITER_BODY}    </data_writer>
     <data_reader profile_name="hexapod_reader" is_default_profile="true">
-      <topic>
-        <resourceLimitsQos>
-          <max_samples>{READER_MAX_SAMPLES}</max_samples>
-          <max_samples_per_instance>{READER_MAX_SAMPLES}</max_samples_per_instance>
-        </resourceLimitsQos>
-      </topic>
-      <times>
-        <heartbeatResponseDelay><sec>0</sec><nanosec>0</nanosec></heartbeatResponseDelay>
-      </times>
-    </data_reader>
-  </profiles>
+{_READER_BODY}    </data_reader>
+<!--endpoints-->  </profiles>
 </dds>
 """
+
+
+#: The graph's per-tick topics but /clock, and the recorder's progress: a run keeps them in a
+#: DDS partition of its own (:func:`partition_of`): a process on the domain that does not load
+#: the run's profile (or derive its partition from the run's key) neither reads them nor
+#: reaches the graph's readers with what it publishes on them, so a flood of copies wakes
+#: no node of the graph (it used to cost each reader a wake-up, a take and a refusal in
+#: Python per copy: docs/benchmarks.md, S7). Everything else (status, indices, the
+#: controller in charge, parameters, services) stays in the default partition, where the
+#: ros2 command line sees it; so does /clock, which tools run with sim time read (no node of
+#: the graph subscribes to it unless started with --sim-time, and none acts on it). What an
+#: attacker who reads the discovery traffic can still do: learn the partition's name (it is
+#: announced in plain text with every endpoint) and publish into it; those messages then
+#: reach the readers and are refused in Python by their signature (msg_auth.py), as before.
+PARTITIONED_TOPICS = tuple(t for t in TICK_TOPICS if t != CLOCK) + (RECORDED,)
+
+
+def partition_of(key: bytes) -> str:
+    """The DDS partition of a run: a name derived from its key (so every process that holds
+    the key file finds it, and nobody else can guess it)."""
+    return "hexapod_" + hashlib.blake2b(key, digest_size=8, person=b"hexapod-part").hexdigest()
+
+
+def run_partition(env: Mapping[str, str] = os.environ) -> str | None:
+    """The partition of the run whose key ``env`` names (``HEXAPOD_KEY_FILE``); None with
+    ``HEXAPOD_AUTH=off`` or no key file named (msg_auth.AuthError if it is unreadable)."""
+    from hexapod_common.core.msg_auth import AUTH_ENV, KEY_ENV, read_key_file
+
+    if env.get(AUTH_ENV, "on").lower() == "off" or not env.get(KEY_ENV):
+        return None
+    return partition_of(read_key_file(env[KEY_ENV]))
+
+
+def endpoint_profiles(partition: str) -> str:
+    """The data_writer and data_reader profiles that put :data:`PARTITIONED_TOPICS` into
+    ``partition`` (rmw_fastrtps takes a profile named as the topic for its endpoints, in
+    place of the default profile: each repeats the default's settings)."""
+    prop = ("      <propertiesPolicy><properties><property><name>partitions</name>"
+            f"<value>{partition}</value></property></properties></propertiesPolicy>\n")
+    out = []
+    for topic in PARTITIONED_TOPICS:
+        out.append(f'    <data_writer profile_name="{topic}">\n{_WRITER_BODY}{prop}'
+                   "    </data_writer>\n")
+        out.append(f'    <data_reader profile_name="{topic}">\n{_READER_BODY}{prop}'
+                   "    </data_reader>\n")
+    return "".join(out)
 
 
 #: The participant ids of a domain: those whose unicast ports (:func:`unicast_ports`) fall
@@ -290,9 +350,12 @@ def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
 
 
 def private_profile(directory: str | os.PathLike[str] | None = None,
-                    remove_at_exit: bool = False, participant_id: int | None = None) -> Path:
+                    remove_at_exit: bool = False, participant_id: int | None = None,
+                    partition: str | None = None) -> Path:
     """Write :data:`FASTDDS_PROFILE` to ``directory`` (default: a new private temporary
     directory, mode 0700) as a file only its owner can read and write; its path.
+    ``partition``: the run's tick topics in that DDS partition (:data:`PARTITIONED_TOPICS`;
+    None: the default partition, as with ``HEXAPOD_AUTH=off``).
 
     ``participant_id`` fixes the participant's id, hence its ports (default: the first one
     free). A process started in place of one that was SIGKILLed would otherwise take the
@@ -303,6 +366,7 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
     made = directory is None
     folder = Path(tempfile.mkdtemp(prefix="hexapod_dds_") if made else directory)
     text, name = FASTDDS_PROFILE, "fastdds_profile.xml"
+    text = text.replace("<!--endpoints-->", endpoint_profiles(partition) if partition else "")
     if participant_id is not None:
         text = text.replace("      <rtps>\n", "      <rtps>\n        <participantID>"
                             f"{participant_id}</participantID>\n", 1)
@@ -317,7 +381,8 @@ def private_profile(directory: str | os.PathLike[str] | None = None,
 
 
 __all__ = ["ANNOUNCE_S", "DOMAIN_PARTICIPANT_IDS", "FASTDDS_PROFILE", "HAND_PARTICIPANT_IDS",
-           "HEALTHY_CHECK_MS", "LEASE_S", "PORT_QUEUE", "PortFence", "READER_MAX_SAMPLES",
+           "HEALTHY_CHECK_MS", "LEASE_S", "PARTITIONED_TOPICS", "PORT_QUEUE", "PortFence",
+           "READER_MAX_SAMPLES", "endpoint_profiles", "partition_of", "run_partition",
            "RESTART_PARTICIPANT_IDS", "SHM_DIR", "TOOL_PARTICIPANT_IDS", "domain_id_from_env",
            "private_profile", "remove_dead_shm", "shm_locks", "unicast_ports",
            "unused_participant_id"]

@@ -69,7 +69,7 @@ from rclpy.subscription import Subscription
 
 from hexapod_common.core import trace
 from .dds_profile import (FASTDDS_PROFILE, HAND_PARTICIPANT_IDS, domain_id_from_env,
-                          private_profile, unused_participant_id)
+                          private_profile, run_partition, unused_participant_id)
 
 RawCallback = Callable[[bytes], Any]  # ``newest`` subscriptions: True if accepted
 #: Longest single wait (s): how late a stop request (signal) may be noticed by an idle node.
@@ -449,7 +449,7 @@ def configure_middleware(participant_ids: range = HAND_PARTICIPANT_IDS) -> None:
             and "FASTRTPS_DEFAULT_PROFILES_FILE" not in os.environ):
         participant = unused_participant_id(domain_id_from_env(), participant_ids)
         os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(private_profile(
-            remove_at_exit=True, participant_id=participant))
+            remove_at_exit=True, participant_id=participant, partition=run_partition()))
 
 
 def init_rclpy(args: list[str] | None, node_name: str) -> bool:

@@ -43,6 +43,8 @@ PUBLISHERS: dict[str, tuple[str, ...]] = {
     T.STATUS: GRAPH_NODES, T.PARAMETERS: (*GRAPH_NODES, "foxglove_bridge"),
     T.RECORDED: ("metrics",),
 }
+#: The node name rmw gives an endpoint whose node it has not discovered yet.
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 #: Topics whose messages the graph's nodes sign (/clock is a bounded type: no room for a tag).
 SIGNED_TOPICS = frozenset(PUBLISHERS) - {T.CLOCK}
 _STAMP = struct.Struct("<iI")
@@ -96,6 +98,7 @@ class InputGuard:
         self.outsiders: dict[str, set[str]] = {}  # every one seen (the end summary)
         self.present: dict[str, set[str]] = {}  # those there at the last look (the status)
         self._relook_at = 0.0  # monotonic s of the next look while some are present
+        self._unnamed = False  # an endpoint's node was not known at the last look
         self._drops_seen = 0  # drops.total at the last refresh
         self._last_drop = -math.inf  # monotonic s of the refresh that saw new drops
         self._verifiers: dict[str, Verifier | Unsigned] = {}
@@ -257,15 +260,20 @@ class InputGuard:
         ones logged as a warning, those that left as info)."""
         self._looked_at = self.drops.total
         self._relook_at = time.monotonic() + RELOOK
+        self._unnamed = False
         for topic in sorted(self._suspect):
             try:
                 infos = self.node.get_publishers_info_by_topic(topic)
             except Exception:  # noqa: BLE001 - the graph can be gone at shutdown
                 continue
+            # an endpoint whose node's name has not been discovered yet (rmw's
+            # _NODE_NAME_UNKNOWN_) is named at a later look, by its name
             names = {f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos
-                     if (i.node_name not in PUBLISHERS.get(topic, ())
-                         and i.node_name not in self.vouched) or
-                     i.node_namespace not in ("/", "")}
+                     if i.node_name != UNKNOWN_NODE
+                     and ((i.node_name not in PUBLISHERS.get(topic, ())
+                           and i.node_name not in self.vouched)
+                          or i.node_namespace not in ("/", ""))}
+            self._unnamed |= any(i.node_name == UNKNOWN_NODE for i in infos)
             left = self.present.get(topic, set()) - names
             if names:
                 self.present[topic] = names
@@ -299,7 +307,8 @@ class InputGuard:
             self._drops_seen = self.drops.total
             self._last_drop = now
         if self._suspect and (self.drops.total != self._looked_at
-                              or (self.present and now >= self._relook_at)):
+                              or ((self.present or self._unnamed)
+                                  and now >= self._relook_at)):
             self.look_up()
 
     def warn_now(self) -> bool:

@@ -8,7 +8,9 @@ fork the node instead: the server imported the node modules once (``preload``), 
 costs its own set-up only. Each forked node gets what ``subprocess.Popen`` would give it:
 its command line (``sys.argv``, read by ``rclpy.init``), its environment, its log on
 stdout and stderr (unbuffered), its own session, its niceness and the working directory of
-the launcher; its process name (``ps``, ``top``) is the node's name.
+the launcher; its process name (``ps``, ``top``: the kernel keeps 15 characters) is the
+node's name, and so is its command line (``ps -f``, ``pgrep -f``, ``/proc/<pid>/cmdline``:
+setproctitle rewrites the one the fork server had; ``sys.argv`` keeps the ROS arguments).
 
 Two departures from a plain ``multiprocessing.Process``, both for "no node outlives its
 launcher" (lifeline.py): the node closes its copy of the server's "alive" pipe (else the
@@ -33,6 +35,8 @@ import signal
 import subprocess
 import sys
 from collections.abc import Mapping, Sequence
+
+import setproctitle
 
 from .lifeline import die_with_parent
 
@@ -105,6 +109,10 @@ def _node_main(module: str, func: str, call_args: tuple[str, ...], argv: tuple[s
     sys.stdout = io.TextIOWrapper(io.FileIO(1, "w", closefd=False), write_through=True)
     sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), write_through=True,
                                   errors="backslashreplace")
+    # first: setproctitle finds the command line's memory next to the environment's, which
+    # the clear() below moves. The node's name alone: rcl names the node's log file after
+    # the program's name, read from the same memory (the ROS arguments made it too long)
+    setproctitle.setproctitle(name)
     os.environ.clear()
     os.environ.update(env)
     if nice:
@@ -112,7 +120,7 @@ def _node_main(module: str, func: str, call_args: tuple[str, ...], argv: tuple[s
     try:
         ctypes.CDLL(None).prctl(PR_SET_NAME, name.encode()[:15], 0, 0, 0)
     except (OSError, AttributeError):
-        pass
+        pass  # (setproctitle set it too; this also where setproctitle could not)
     die_with_parent(parent=server)
     sys.argv = ["-c", *argv]
     try:

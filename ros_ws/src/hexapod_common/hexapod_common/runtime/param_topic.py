@@ -52,10 +52,18 @@ class ParamAnnouncer:
             values = {**binding.params.to_flat(), **values}
             binding.say_changes = False  # said by publish(), with the change's tick
         self.log = getattr(node, "log", None) or node.get_logger()
+        #: every parameter's value now: a set to the value it has is no change (not logged,
+        #: not recorded)
+        self.current = dict(values)
         self.publish("start", 0, values)
 
     def _changed(self, params: list[Parameter]) -> None:
-        values = {p.name: p.value for p in params}
+        values = {p.name: p.value for p in params
+                  if p.name not in self.current or self.current[p.name] != p.value
+                  or type(self.current[p.name]) is not type(p.value)}
+        self.current.update(values)
+        if not values:
+            return
         if self.deferred:
             self.pending.update(values)
         else:

@@ -20,12 +20,17 @@ in (0, inf]``. A rejected runtime change leaves the node's value as it was; a ba
 the params file at start is reported by :func:`declare_params` as a
 :class:`~hexapod_common.core.errors.ParameterError` (the node logs it and exits non-zero).
 
-Numbers are declared with dynamic typing so that ``400`` and ``400.0`` are both accepted (the
-validator converts); rclpy still rejects a value outside a finite descriptor range before
-our callback sees it, with its own message that names the parameter, the value and the
-range. ``T_max = inf`` (ideal actuators) is written ``.inf`` in a params file (rcl's
-parser also accepts ``inf``; both are read as float infinity) and ``-p actuator.t_max:=.inf``
-on a command line.
+Numbers are declared with dynamic typing so that ``400`` and ``400.0`` are both accepted, and
+stored in the parameter's own type (:func:`~hexapod_common.core.params.as_kind`): a double
+parameter set to the integer ``1000000`` (what ``ros2 param set NODE ground.k_y 1000000``
+sends), in a params file or at runtime (a pre-set callback converts it before rclpy's checks),
+stays a double, ``1000000.0``, in ``ros2 param get``/``describe``/``dump``. At runtime a
+string that reads as a number is that number (``ros2 param set`` reads ``1e6`` as the string
+``'1e6'``: YAML 1.1); any other string for a number is refused as the wrong type. rclpy still
+rejects a value outside a finite descriptor range before our callback sees it, with its own
+message that names the parameter, the value and the range. ``T_max = inf`` (ideal actuators)
+is written ``.inf`` in a params file (rcl's parser also accepts ``inf``; both are read as
+float infinity) and ``-p actuator.t_max:=.inf`` on a command line.
 """
 from __future__ import annotations
 
@@ -41,8 +46,9 @@ from rclpy.parameter import Parameter
 
 from ..core.errors import ParameterError
 from ..core.params import (COMMON_NODE_PARAMS, NODE_PARAMS, SPECS, HexapodParams, Spec,
-                           check_spec, check_value, controller_group, controller_names,
-                           from_flat, load_params, nearest, unknown_parameter)
+                           as_kind, check_spec, check_value, controller_group,
+                           controller_names, from_flat, load_params, nearest,
+                           unknown_parameter)
 
 #: Parameters (or groups, with a trailing '.') that may change while the graph runs.
 LIVE = ("ground.", "actuator.", "pd_p.", "pd_pf.", "run.controller", "sim.lockstep_timeout",
@@ -150,8 +156,11 @@ def declare_params(node: Node, defaults: HexapodParams | None = None,
             flat[name] = check_value(name, overrides[name].value) if name in overrides \
                 else base[name]
             continue
+        # the override (if any) in the parameter's type: rclpy would store it as given
+        value = as_kind(name, overrides[name].value) if name in overrides else base[name]
         try:
-            value = node.declare_parameter(name, base[name], descriptor(name, spec)).value
+            value = node.declare_parameter(name, value, descriptor(name, spec),
+                                           ignore_override=True).value
         except (InvalidParameterTypeException, InvalidParameterValueException,
                 ParameterException) as err:
             # rclpy's descriptor checks fired first: say it in the engine's words.
@@ -195,6 +204,19 @@ def declare_node_param(node: Node, name: str) -> Any:
     return check_spec(name, spec, value)
 
 
+def typed(changes: list[Parameter]) -> list[Parameter]:
+    """Pre-set callback: each model parameter's new value in that parameter's type, a string
+    that reads as a number for a numeric one included (``ros2 param set NODE ground.k_y 1e6``
+    sends ``'1e6'``: :func:`~hexapod_common.core.params.as_kind`), before rclpy's descriptor
+    checks and ours; other values as they came (a string that is no number is then refused
+    with the parameter, the value and the type expected)."""
+    out = []
+    for p in changes:
+        value = as_kind(p.name, p.value, text=True)
+        out.append(p if type(value) is type(p.value) else Parameter(p.name, value=value))
+    return out
+
+
 class ParamBinding:
     """Keeps a node's :class:`HexapodParams` in sync with its ROS parameters.
 
@@ -220,6 +242,7 @@ class ParamBinding:
         #: Log each accepted change here; a node's ParamAnnouncer turns this off and says
         #: it with the tick the change takes effect at instead (param_topic.py).
         self.say_changes = True
+        node.add_pre_set_parameters_callback(typed)
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
@@ -282,4 +305,4 @@ class ParamBinding:
 
 
 __all__ = ["LIVE", "ROS_OWN", "USES", "ParamBinding", "check_overrides", "declare_node_param",
-           "declare_params", "descriptor", "is_live", "used_by"]
+           "declare_params", "descriptor", "is_live", "typed", "used_by"]

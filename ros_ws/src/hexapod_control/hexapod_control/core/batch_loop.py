@@ -15,7 +15,7 @@ swapped behind the active ones), so it costs the others nothing. Blocks run in p
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from hexapod_common.core.jit import njit, prange
 
 from hexapod_sim.core.actuator import clip_torque
 from hexapod_sim.core.batch_physics import (LANES, block_integrate, block_prepare, block_sample,
@@ -90,11 +90,15 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
     Records the sample of tick k
     into obs_out[case, k - rec_offset] when that row exists (the tick after the last too),
     and sets ok[case]. Scores ticks rec_offset..score_end (none if score_end < rec_offset)
-    into acc_out[case] (index_sums: row rec_offset starts the window, the later ones are
-    added against the references hip_ref[k], foot_ref[k] (6, 2)) and clears finite[case]
-    if any value of a scored sample is not finite.
+    into acc_out[case, w] (cases, W, index_sums.ACC_SIZE): W consecutive windows of
+    (score_end - rec_offset) / W ticks each (index_sums: row rec_offset + w M starts window w
+    and is also the last sample of window w - 1; the samples are added against the
+    references hip_ref[k], foot_ref[k] (6, 2)) and clears finite[case] if any value of a
+    scored sample is not finite.
     """
     FH, WK, FF, QDD, TR, FLAG = block_scratch()
+    windows = acc_out.shape[1]
+    window = max(1, (score_end - rec_offset) // max(1, windows))
     sample = np.empty((9, N_LEGS, 2))
     TQ = np.zeros((2 * N_LEGS, LANES))
     n_ticks = theta_d.shape[0]
@@ -111,13 +115,19 @@ def run_block(X, PT, codes, G, n, theta_d, theta_vel_d, substeps, rec_offset,  #
             for b in range(n):
                 block_sample(X, TQ, PT, b, FH, WK, FF, QDD, obs_out[cols[b], r])
         if rec_offset <= k <= score_end:
+            w = (k - rec_offset) // window
+            at = k - rec_offset - w * window
             for b in range(n):
                 c = cols[b]
                 block_sample(X, TQ, PT, b, FH, WK, FF, QDD, sample)
-                if k == rec_offset:
-                    start_window(acc_out[c], sample[O_HP])
-                else:
-                    add_sample(acc_out[c], sample[O_TQ], sample[O_THV], sample[O_HF],
+                if at == 0 and w > 0:  # the last sample of window w - 1 ...
+                    add_sample(acc_out[c, w - 1], sample[O_TQ], sample[O_THV], sample[O_HF],
+                               sample[O_HP], hip_ref[k], sample[O_FP], foot_ref[k])
+                if at == 0 and w < windows:  # ... is row 0 of window w
+                    start_window(acc_out[c, w], sample[O_HP], hip_ref[k], sample[O_FP],
+                                 foot_ref[k])
+                elif at != 0:
+                    add_sample(acc_out[c, w], sample[O_TQ], sample[O_THV], sample[O_HF],
                                sample[O_HP], hip_ref[k], sample[O_FP], foot_ref[k])
                 if not _all_finite(sample):
                     finite[c] = False

@@ -24,9 +24,10 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
-import numpy as np
 import numba
-from numba import njit
+import numpy as np
+
+from hexapod_common.core.jit import njit
 
 from hexapod_sim.core.actuator import saturate
 from hexapod_sim.core.drive import drive_advance
@@ -360,7 +361,7 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
         ok[j] = r.diverged_at is None
 
     fast = _run_plug_ins(cases, duration, plug_in)
-    _run_compiled_rows(cases, fast, ref, n, k_a, -1, obs, ok, np.zeros((0, ACC_SIZE)),
+    _run_compiled_rows(cases, fast, ref, n, k_a, -1, obs, ok, np.zeros((0, 1, ACC_SIZE)),
                        np.zeros(0, dtype=np.bool_))
     window_ref = Reference(*(_read_only(a[k_a:]) for a in ref))
     return BatchResult(tuple(cases), t[k_a:], obs, window_ref, ok)
@@ -368,9 +369,10 @@ def run_batch(cases: Sequence[Case], duration: float, record_from: float) -> Bat
 
 @dataclass(frozen=True)
 class ScoredBatch:
-    """The index sums of ticks k_a..k_b of every case (``sums`` (cases, ACC_SIZE): the
-    accumulators of hexapod_common.core.index_sums) and which cases finished without
-    diverging with every value of those samples finite (``ok``); ``window`` (t_a, t_b) s."""
+    """The index sums of ticks k_a..k_b of every case, cut into ``windows`` consecutive
+    windows of equal length (``sums`` (cases, windows, ACC_SIZE): the accumulators of
+    hexapod_common.core.index_sums), and which cases finished without diverging with every
+    value of those samples finite (``ok``); ``window`` (t_a, t_b) s of the whole span."""
 
     cases: tuple[Case, ...]
     window: tuple[float, float]
@@ -378,27 +380,35 @@ class ScoredBatch:
     ok: np.ndarray
 
 
-def score_batch(cases: Sequence[Case], duration: float, window: tuple[int, int]
-                ) -> ScoredBatch:
+def score_batch(cases: Sequence[Case], duration: float, window: tuple[int, int],
+                windows: int = 1) -> ScoredBatch:
     """Run every case for ``duration`` s in parallel and score ticks ``window`` = (k_a, k_b)
-    on the fly, without recording them: what a sweep needs of a run (the sums are those of
-    the same samples recorded, to the last bit). Cases as for :func:`run_batch`."""
+    on the fly, without recording them, as ``windows`` consecutive windows of
+    (k_b - k_a) / windows ticks each (one per gait cycle, say): what a sweep needs of a run
+    (the sums are those of the same samples recorded, to the last bit). Cases as for
+    :func:`run_batch`."""
     n = _batch_ticks(cases, duration)
     k_a, k_b = window
     if not 0 <= k_a < k_b <= n:
         raise ParameterError("window", window, f"ticks 0 <= k_a < k_b <= {n}")
+    if windows < 1 or (k_b - k_a) % windows:
+        raise ParameterError("windows", windows,
+                             f"a whole number that divides the {k_b - k_a} ticks scored")
+    m = (k_b - k_a) // windows
     p0 = cases[0].params
     ref = batch_reference(p0, n)
-    sums = np.full((len(cases), ACC_SIZE), np.nan)
+    sums = np.full((len(cases), windows, ACC_SIZE), np.nan)
     ok = np.zeros(len(cases), dtype=np.bool_)
     finite = np.ones(len(cases), dtype=np.bool_)
 
     def plug_in(j: int, r: RunResult) -> None:  # scored from its samples
-        w = r.obs[k_a:k_b + 1]
-        accumulate(sums[j], w[:, O_TQ], w[:, O_THV], w[:, O_HF], w[:, O_HP],
-                   ref.hip[k_a:k_b + 1], w[:, O_FP], ref.foot[k_a:k_b + 1])
+        for w in range(windows):
+            a, b = k_a + w * m, k_a + (w + 1) * m + 1
+            s = r.obs[a:b]
+            accumulate(sums[j, w], s[:, O_TQ], s[:, O_THV], s[:, O_HF], s[:, O_HP],
+                       ref.hip[a:b], s[:, O_FP], ref.foot[a:b])
         ok[j] = r.diverged_at is None
-        finite[j] = bool(np.all(np.isfinite(w)))
+        finite[j] = bool(np.all(np.isfinite(r.obs[k_a:k_b + 1])))
 
     fast = _run_plug_ins(cases, duration, plug_in)
     _run_compiled_rows(cases, fast, ref, n, k_a, k_b, np.empty((len(cases), 0) + OBS_SHAPE),
@@ -470,7 +480,7 @@ def _run_compiled_batch(cases: Sequence[Case], ref: Reference, n: int, k_a: int,
                         finite: np.ndarray) -> None:
     """Run cases with a compiled law; their samples into ``obs`` (cases, n+1-k_a, 9, 6, 2)
     (or (cases, 0, 9, 6, 2): none), their ok flags into ``ok``, and with k_b >= k_a the sums
-    of ticks k_a..k_b into ``sums`` (cases, ACC_SIZE) and finite flags into ``finite``."""
+    of ticks k_a..k_b into ``sums`` (cases, windows, ACC_SIZE) and finite flags into ``finite``."""
     S = np.stack([initial_state(c.params) for c in cases])
     Ps = np.stack([model_vector(c.params) for c in cases])
     codes = np.array([batch_code(c) for c in cases], dtype=np.int64)

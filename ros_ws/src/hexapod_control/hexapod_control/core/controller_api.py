@@ -26,7 +26,7 @@ from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from hexapod_common.core.layout import O_FF, O_TH, O_THV, O_TQ
-from hexapod_common.core.params import Spec
+from hexapod_common.core.params import KIND_INFERRED, Spec
 
 #: Shape of every per-joint array: (legs, joints).
 JOINT_SHAPE = (6, 2)
@@ -125,12 +125,20 @@ class Controller(Protocol):
 
 
 def param(description: str, lo: float | None = None, hi: float | None = None, *,
-          default: Any, kind: type = float, lo_open: bool = False, hi_open: bool = False,
-          choices: tuple[str, ...] = ()) -> Any:
-    """A field of a controller's ``Params`` dataclass: type, range [lo, hi] (open ends by
-    flag), allowed strings, default and a description with units."""
+          default: Any, kind: type | None = None, lo_open: bool = False,
+          hi_open: bool = False, choices: tuple[str, ...] = ()) -> Any:
+    """A field of a controller's ``Params`` dataclass: range [lo, hi] (open ends by flag),
+    allowed strings, default and a description with units.
+
+    Its kind (``float``, ``int``, ``bool`` or ``str``) is ``kind`` if given, else the field's
+    annotation (``warmup: int = param(...)`` takes whole numbers only: 2.5 is refused), else
+    the default's type; the kind is settled when the controller is registered
+    (params.register_controller_group), which also checks the default against it."""
+    inferred = kind is None
+    if kind is None:
+        kind = type(default) if type(default) in (bool, int, str) else float
     spec = Spec(kind, description, lo, hi, lo_open, hi_open, choices, False, default)
-    return field(default=default, metadata={"spec": spec})
+    return field(default=default, metadata={"spec": spec, KIND_INFERRED: inferred})
 
 
 __all__ = ["Context", "Controller", "DriveCommand", "JOINT_SHAPE", "Observation", "call_law",

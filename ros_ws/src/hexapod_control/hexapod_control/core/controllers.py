@@ -12,7 +12,7 @@ The output is the *demanded* torque T_C; saturation (eq. 6) belongs to the actua
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from hexapod_common.core.kinematics import foot_force_torque
 from hexapod_common.core.layout import (C_DQREF, C_KD, C_KF, C_KP, C_QREF, C_TFF, O_FF, O_TH,
@@ -42,7 +42,7 @@ def gain_vector(g: GainParams) -> np.ndarray:
     return np.array(g.as_tuple(), dtype=float)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def leg_demand(code, kp1, kd1, kp2, kd2, kf, th1, th2, w1, w2, ffx, ffy,  # type: ignore[no-untyped-def]
                thd1, thd2, wd1, wd2, l1, l2):
     """Demanded torques (T_C1, T_C2) (N m) of one leg: joint angles th (rad) and rates w

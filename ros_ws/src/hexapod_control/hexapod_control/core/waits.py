@@ -21,11 +21,15 @@ class InputWaits:
     forces: int = 0  #: of which the foot forces were missing (the sim's, rare)
     given_up: int = 0  #: states given up unanswered: their inputs never came
 
-    def count(self, reference_missing: bool, forces_missing: bool) -> None:
-        """One state waits, for the inputs said missing."""
+    def count(self, reference_missing: bool, forces_missing: bool) -> bool:
+        """One state waits, for the inputs said missing; a state that misses neither does
+        not wait (it was answered; an older state is what waits): nothing counted, False."""
+        if not (reference_missing or forces_missing):
+            return False
         self.waited += 1
         self.reference += reference_missing
         self.forces += forces_missing
+        return True
 
     def text(self) -> str:
         """The end summary's words (read back by :func:`parse`)."""

@@ -223,38 +223,56 @@ class _Commit(NamedTuple):
 
 @dataclass
 class _File:
-    """One MCAP file of the bag and the log of its committed writes."""
+    """One MCAP file of the bag: its last committed write and running totals of the others.
+
+    Memory stays bounded by the summary (one Chunk Index per chunk): the tail and the reorder
+    buffer of a commit are dropped once the next one lands (keeping every commit's tail and
+    buffer once made a recorder grow by twice the bag's rate, quadratically in chunks)."""
 
     path: Path
     fd: int
-    log: list[_Commit]
+    last: _Commit
+    """The last committed write (its ``tail`` is the one on disk)."""
     size: int = 0
     """Bytes in the file (the committed data section and its tail)."""
     metadata_indexes: list[bytes] = field(default_factory=list)
     """Metadata Index records of the Metadata records in this file's data section."""
+    chunk_indexes: bytearray = field(default_factory=bytearray)
+    """The Chunk Index records of every committed chunk, in order."""
+    _counts: dict[int, int] = field(default_factory=dict)
+    _start: int = _NO_START
+    _end: int = 0
+    _chunks: int = 0
+
+    def commit(self, commit: _Commit) -> None:
+        """Make ``commit`` the last write; fold its chunk into the totals (one assignment
+        at the end, so a signal handler that raises leaves the previous commit in place)."""
+        if commit.chunk_index:
+            self.chunk_indexes += commit.chunk_index
+            self._chunks += 1
+        for channel, n in commit.counts:
+            self._counts[channel] = self._counts.get(channel, 0) + n
+        if commit.counts:
+            self._start = min(self._start, commit.start_time)
+            self._end = max(self._end, commit.end_time)
+        self.last = commit
 
     @property
     def end(self) -> int:
         """File offset where the data section ends and the tail starts."""
-        return self.log[-1].end
+        return self.last.end
 
     def counts(self) -> dict[int, int]:
         """Messages per channel in the flushed chunks."""
-        out: dict[int, int] = {}
-        for commit in self.log:
-            for channel, n in commit.counts:
-                out[channel] = out.get(channel, 0) + n
-        return out
+        return dict(self._counts)
 
     def times(self) -> tuple[int, int]:
         """(first, last) log time of the flushed chunks."""
-        starts = [c.start_time for c in self.log if c.counts]
-        ends = [c.end_time for c in self.log if c.counts]
-        return (min(starts), max(ends)) if starts else (_NO_START, 0)
+        return (self._start, self._end) if self._counts else (_NO_START, 0)
 
     def chunks(self) -> int:
         """Chunks in the file."""
-        return sum(1 for c in self.log if c.chunk_index)
+        return self._chunks
 
 
 class BagWriter(Closing):
@@ -398,7 +416,7 @@ class BagWriter(Closing):
     @property
     def message_count(self) -> int:
         """Messages written so far (flushed or not)."""
-        pending = len(self._file.log[-1].pending) if self._file else 0
+        pending = len(self._file.last.pending) if self._file else 0
         return sum(self._flushed_counts().values()) + pending
 
     # ------------------------------------------------------------------ topics, records
@@ -618,7 +636,7 @@ class BagWriter(Closing):
         record = _MSG_HEADER.pack(
             5, 22 + len(data), channel, info.sequence & 0xFFFFFFFF, log_time, log_time,
         ) + data
-        pending = self._file.log[-1].pending
+        pending = self._file.last.pending
         now = time.monotonic()
         if not pending:
             self._opened = now
@@ -660,7 +678,7 @@ class BagWriter(Closing):
     def _flush_chunk(self, *, everything: bool = False) -> None:
         assert self._file is not None
         self._opened = time.monotonic()
-        before = self._file.log[-1].pending
+        before = self._file.last.pending
         self._next_size_flush = self._pending_bytes + self._chunk_size
         if not before:
             return
@@ -727,7 +745,7 @@ class BagWriter(Closing):
         f = self._file
         assert f is not None
         if commit is None:
-            commit = _Commit(f.end + len(data), f.log[-1].pending)
+            commit = _Commit(f.end + len(data), f.last.pending)
         tail = self._tail(f, commit, self._state)
         try:
             _pwrite(f, data + tail, f.end)
@@ -736,7 +754,7 @@ class BagWriter(Closing):
         except OSError as err:
             self._fail(err)
         f.size = commit.end + len(tail)
-        f.log.append(commit._replace(tail=tail))
+        f.commit(commit._replace(tail=tail))
 
     def _fail(self, err: OSError) -> None:
         """A write failed: restore a complete tail, close, raise :class:`BagStorageError`."""
@@ -746,8 +764,8 @@ class BagWriter(Closing):
         self.failure = f'cannot write {f.path.name}: {why}'
         self._state = 'failed'
         self._drop_reserve()
-        self.lost_messages += len(f.log[-1].pending)
-        last = f.log[-1]
+        self.lost_messages += len(f.last.pending)
+        last = f.last
         commit = last._replace(chunk_index=b'', counts=(), pending=[])
         restored = False
         for tail in (self._tail(f, commit, 'failed'), last.tail):
@@ -758,7 +776,7 @@ class BagWriter(Closing):
                 continue
             restored = True
             break
-        f.log.append(commit)
+        f.commit(commit)
         self._file = None
         self._done.append(f)
         os.close(f.fd)
@@ -794,7 +812,7 @@ class BagWriter(Closing):
             data += rec
         data_end = _encode(DataEnd(0))
         summary_start = start + len(data) + len(data_end)
-        chunk_indexes = b''.join(c.chunk_index for c in f.log) + commit.chunk_index
+        chunk_indexes = bytes(f.chunk_indexes) + commit.chunk_index
         groups: list[tuple[int, bytes]] = [
             (0x03, b''.join(s for _, s in self._schemas.values())),
             (0x04, b''.join(self._channels)),
@@ -841,9 +859,9 @@ class BagWriter(Closing):
         except OSError as err:
             msg = f'cannot create bag file {path}: {err.strerror}'
             raise BagWriteError(msg) from err
-        pending = self._file.log[-1].pending if self._file else []
+        pending = self._file.last.pending if self._file else []
         header = MAGIC + _encode(Header('ros2', LIBRARY))
-        self._file = _File(path, fd, [_Commit(len(header), pending)])
+        self._file = _File(path, fd, _Commit(len(header), pending))
         try:
             _pwrite(self._file, header, 0)
         except OSError as err:
@@ -865,14 +883,14 @@ class BagWriter(Closing):
 
     def _finish_file(self, f: _File, state: str) -> None:
         """Rewrite the tail of a finished file with its final state and close it."""
-        commit = f.log[-1]
+        commit = f.last
         tail = self._tail(f, commit._replace(chunk_index=b'', counts=()), state)
         try:
             _pwrite(f, tail, commit.end)
             os.ftruncate(f.fd, commit.end + len(tail))
         except OSError as err:
             self._fail(err)
-        f.log.append(commit._replace(chunk_index=b'', counts=(), tail=tail))
+        f.commit(commit._replace(chunk_index=b'', counts=(), tail=tail))
         os.close(f.fd)
 
     def _flushed_counts(self) -> dict[int, int]:

@@ -12,7 +12,7 @@ of ``/hexapod/joint_states`` (``hexapod_common.core.labels``); a cycle with held
 torques is labelled so, never with the controller's name. Segments are split at changes of
 the controller in charge, i.e. at the recorded switches, and at every recorded parameter
 change (bag_params.py), each segment naming the values that differ from the start; a
-segment's indices cover the cycles its controller fully commanded.
+segment's indices are the per-cycle mean over the cycles its controller fully commanded.
 """
 from __future__ import annotations
 
@@ -34,8 +34,9 @@ from hexapod_common.core.params import HexapodParams
 from ..bag import Bag, BagReadError, iter_joint_state_blocks, open_bag
 from .bag_params import bag_params
 from .cycles import CYCLE_TOPICS, Cycle, CycleScorer
-from .indices import Indices, WindowSums
+from .indices import Indices, per_cycle_mean
 from .recording import status_indices
+from .walking import not_walking
 
 STREAMS = CYCLE_TOPICS
 #: At most this many points per plot series (older points are thinned by 2 when exceeded).
@@ -55,12 +56,15 @@ class SegmentResult:
     t_end: float
     cycles: int
     indices: Indices | None
+    """The per-cycle mean of its cycles' indices (None if it has none, or one fell)."""
     params: tuple[tuple[str, Any], ...] = ()
     """Parameters in force over the segment that differ from the start values."""
     controller_params: tuple[tuple[str, Any], ...] = ()
     """A joined controller's own parameters (declared by its node, read by the sim when it
     took over: the bag's ``controller`` record); empty for the engine's controllers, whose
     gains are model parameters (``pd_p.*``, ``pd_pf.*``)."""
+    fallen: str = ""
+    """Why one of its cycles was not a walk (then ``indices`` is None); "" if all were."""
 
 
 @dataclass
@@ -181,7 +185,7 @@ def analyze_bag(path: str | Path) -> BagAnalysis:
             ks = np.arange(k0, k1)[sel]
             series.add(ks * dt, sig, label_ticks(changes, ks))
 
-        scorer = CycleScorer(m, dt, on_samples=plot)
+        scorer = CycleScorer(m, dt, on_samples=plot, walk=lambda sums: not_walking(sums, p))
         cycles: list[CycleResult] = []
         ticks = 0
         last_tick = 0
@@ -244,7 +248,8 @@ def with_param_boundaries(changes: list[tuple[int, str]],
 
 def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: float,
               t_last: float, tl: ParamTimeline | None = None) -> list[SegmentResult]:
-    """One segment per controller stretch; its indices cover its complete cycles."""
+    """One segment per controller stretch; its indices are the per-cycle mean of its
+    complete cycles (indices.per_cycle_mean: not the index of their union)."""
     out = []
     bounds = [k for k, _ in changes[1:]]
     for j, (k, who) in enumerate(changes):
@@ -252,17 +257,17 @@ def _segments(cycles: list[CycleResult], changes: list[tuple[int, str]], dt: flo
         t1 = bounds[j] * dt if j < len(bounds) else t_last
         mine = [c for c in cycles if c.controller == who and c.sums is not None
                 and t0 <= c.t_a and c.t_b <= max(t1, t0) + 1e-9]
-        total: WindowSums | None = None
-        for c in mine:
-            assert c.sums is not None  # filtered above
-            total = c.sums if total is None else total + c.sums
+        fell = next((f"cycle {c.cycle}: {c.fallen}" for c in mine if c.fallen), "")
+        scored = [c.indices for c in mine]
+        mean = (per_cycle_mean([i for i in scored if i is not None])
+                if mine and not fell else None)
         changed: tuple[tuple[str, Any], ...] = ()
         if tl is not None:
             now = tl.at(k)
             changed = tuple((n, now[n]) for n in sorted(now)
                             if now[n] != tl.start.get(n) and n != "run.controller")
-        out.append(SegmentResult(who, t0, t1, len(mine), total.indices() if total else None,
-                                 changed))
+        out.append(SegmentResult(who, t0, t1, len(mine), mean,
+                                 changed, fallen=fell))
     return out
 
 

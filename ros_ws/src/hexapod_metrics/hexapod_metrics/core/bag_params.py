@@ -18,7 +18,9 @@ from typing import Any, NamedTuple
 from hexapod_common.core.errors import HexapodError
 from hexapod_common.core.param_log import RECORD_NAME, ParamRecord, ParamRecordError, ParamTimeline
 from hexapod_common.core.param_log import timeline as make_timeline
-from hexapod_common.core.params import SPECS, HexapodParams, from_flat, load_params
+from hexapod_common.core.controller_names import check_name
+from hexapod_common.core.params import (CONTROLLERS, SPECS, HexapodParams, controller_names,
+                                        from_flat, load_params)
 
 from ..bag import Bag
 from ..bag import BagReadError
@@ -30,12 +32,25 @@ DEFAULTS = "the shipped defaults (the bag records none)"
 
 
 class BagParams(NamedTuple):
-    """The start parameters, where they came from, and the timeline of changes (if any)."""
+    """The start parameters, where they came from (with the recorded start values of
+    controllers not registered here, e.g. a plug-in that is not installed on this machine:
+    taken as recorded, unchecked, and named in ``source``: :data:`FOREIGN`), and the
+    timeline of changes (if any)."""
 
     params: HexapodParams
     source: str
     timeline: ParamTimeline | None
     records: tuple[ParamRecord, ...] = ()
+
+
+#: How ``source`` names the parameters of controllers not registered here.
+FOREIGN = "parameters of controllers not registered here, taken as recorded (unchecked)"
+
+
+def _foreign(name: str) -> bool:
+    """Whether ``name`` is a parameter of a group no controller registered here has."""
+    group, dot, _ = name.partition(".")
+    return bool(dot) and not any(n.startswith(group + ".") for n in SPECS)
 
 
 def read_records(bag: Bag) -> list[ParamRecord]:
@@ -68,7 +83,10 @@ def _check_mirror(bag: Bag, custom: dict[str, Any], records: list[ParamRecord]) 
             flat = json.loads(custom[PARAMS_KEY])
         except (TypeError, ValueError) as err:
             raise BagReadError(f"{where}: {PARAMS_KEY} is not JSON ({err})") from err
-        starts = [{k: v for k, v in r.values.items() if k in SPECS}
+        # the parameters known here, and those of a controller not registered here as the
+        # recording machine knew them (its mirror has them: they must be in a start record)
+        starts = [{k: v for k, v in r.values.items()
+                   if k in SPECS or (k in flat and _foreign(k))}
                   for r in records if r.kind == "start"]
         if flat not in starts:
             bad = sorted(k for k in flat if all(s.get(k) != flat[k] for s in starts))
@@ -82,8 +100,20 @@ def _validated(flat_json: str) -> HexapodParams:
     """from_flat of a JSON-encoded flat dict, remembered: its reachability check of the gait
     costs ~50 ms, and analysing a batch of bags of one run's parameters (a sweep's, a
     fuzz's) would pay it per bag. HexapodParams is frozen: sharing one is safe; a failure
-    is not remembered (raised again each time)."""
-    return from_flat(json.loads(flat_json))
+    is not remembered (raised again each time).
+
+    ``run.controller`` may name any controller of the graph that recorded the bag (the
+    naming rule, core/controller_names.py): a node that joined and was in charge from tick
+    0 is no controller registered here; it is kept as recorded."""
+    flat = json.loads(flat_json)
+    kept: dict[str, Any] = {}
+    controller = flat.get("run.controller")
+    if isinstance(controller, str) and ":" not in controller \
+            and controller not in controller_names():
+        kept["controller"] = check_name(controller)
+        flat["run.controller"] = CONTROLLERS[0]
+    p = from_flat(flat)
+    return p.with_checked({"run": kept}) if kept else p
 
 
 def bag_params(bag: Bag) -> BagParams:
@@ -101,7 +131,15 @@ def bag_params(bag: Bag) -> BagParams:
             p = _validated(json.dumps(tl.start, sort_keys=True))
         except HexapodError as err:
             raise BagReadError(f"{bag.path}: recorded start parameters: {err}") from err
-        return BagParams(p, FROM_MCAP, tl, tuple(records))
+        foreign: dict[str, Any] = {}
+        for r in records:
+            if r.kind == "start":
+                for k, v in r.values.items():
+                    if _foreign(k):
+                        foreign.setdefault(k, v)
+        source = FROM_MCAP + (f"; {FOREIGN}: " + ", ".join(
+            f"{k}={v!r}" for k, v in sorted(foreign.items())) if foreign else "")
+        return BagParams(p, source, tl, tuple(records))
     try:
         mirrored = params_from_custom_data(custom)
     except (HexapodError, ValueError, TypeError) as err:
@@ -111,4 +149,5 @@ def bag_params(bag: Bag) -> BagParams:
     return BagParams(load_params(), DEFAULTS, None)
 
 
-__all__ = ["BagParams", "DEFAULTS", "FROM_MCAP", "FROM_YAML", "bag_params", "read_records"]
+__all__ = ["BagParams", "DEFAULTS", "FOREIGN", "FROM_MCAP", "FROM_YAML", "bag_params",
+           "read_records"]

@@ -22,7 +22,8 @@ from hexapod_common.core import labels as L
 from hexapod_common.core import topics as T
 
 from hexapod_common.core.cdr import decode_joint_state_batch
-from .indices import REPORTED_NAMES, Indices, WindowSums, lag_growth, sums_from_obs
+from .indices import (REPORTED_NAMES, Indices, WindowSums, lag_growth, per_cycle_mean,
+                      sums_from_obs)
 
 #: The state topics a cycle's indices need, all stamped per tick.
 CYCLE_TOPICS = (T.JOINT_STATES, T.FOOT_FORCES, T.HIP_STATES, T.REFERENCE)
@@ -48,19 +49,23 @@ class Cycle:
     sums: WindowSums | None    # None if ticks are missing
     missing: int = 0
     lag_growth: float = float("nan")
+    fallen: str = ""
+    """Why the cycle was not a walk (walking.not_walking; "" if it was one)."""
 
     @property
     def indices(self) -> Indices | None:
-        """The cycle's indices, None if incomplete."""
-        return self.sums.indices() if self.sums else None
+        """The cycle's indices, None if incomplete or not a walk."""
+        return self.sums.indices() if self.sums and not self.fallen else None
 
     def as_dict(self) -> dict[str, Any]:
-        """The cycle as indices.json lists it (only for cycles with sums)."""
+        """The cycle as indices.json lists it (only for cycles with sums); a cycle that was
+        not a walk has ``fallen`` (why) and no indices."""
         idx = self.indices
         return {"cycle": self.cycle, "t_a": self.t_a, "t_b": self.t_b,
                 "controller": self.in_charge, "label": self.controller,
                 "uncommanded_ticks": self.uncommanded,
-                "indices": idx.as_dict() if idx else None, "lag_growth": self.lag_growth}
+                "indices": idx.as_dict() if idx else None, "lag_growth": self.lag_growth,
+                **({"fallen": self.fallen} if self.fallen else {})}
 
 
 class TickLabels:
@@ -178,11 +183,14 @@ class CycleScorer:
     complete; ``take(final=True)`` at the end also scores the cycles cut short."""
 
     def __init__(self, ticks_per_cycle: int, period: float, gap_ticks: int | None = None,
-                 on_samples: SampleHook | None = None) -> None:
+                 on_samples: SampleHook | None = None,
+                 walk: Callable[[WindowSums], str | None] | None = None) -> None:
         """``gap_ticks``: give a cycle up (no sums) once a topic is this many ticks past its
         end while another has not reached it (live runs; None: wait, as for a bag, whose
         topics come chunk by chunk). ``on_samples(k0, k1, obs, ref)``: called with each
-        complete cycle's samples (obs (M+1, 9, 6, 2), ref: ``topics.split_reference``)."""
+        complete cycle's samples (obs (M+1, 9, 6, 2), ref: ``topics.split_reference``).
+        ``walk(sums)``: why a cycle was not a walk, None if it was (walking.not_walking)."""
+        self.walk = walk
         self.gap = gap_ticks
         self.on_samples = on_samples
         self.n = int(ticks_per_cycle)
@@ -265,19 +273,25 @@ class CycleScorer:
         sums = sums_from_obs(obs, ref["hip"], ref["foot"], dt)
         if self.on_samples is not None:
             self.on_samples(k0, k1, obs, ref)
+        fallen = (self.walk(sums) if self.walk is not None else None) or ""
         prev = self.cycles[-1] if self.cycles else None
         growth = (lag_growth(prev.indices, sums.indices())
-                  if prev is not None and prev.cycle == c - 1 else float("nan"))
-        return Cycle(c, k0 * dt, k1 * dt, label, who, uncommanded, sums, 0, growth)
+                  if prev is not None and prev.cycle == c - 1 and not fallen
+                  else float("nan"))
+        return Cycle(c, k0 * dt, k1 * dt, label, who, uncommanded, sums, 0, growth, fallen)
 
 def indices_values(cycle: Cycle) -> tuple[tuple[str, str], ...]:
     """The key/values of a cycle's /hexapod/indices status (its indices, L, lag, growth,
-    label, controllers in charge, uncommanded ticks, cycle and times)."""
+    label, controllers in charge, uncommanded ticks, cycle and times; a cycle that was not a
+    walk: ``fallen`` and why, no indices)."""
     idx = cycle.indices
-    assert idx is not None
-    values = tuple((n, repr(float(getattr(idx, n)))) for n in REPORTED_NAMES)
-    return values + (("lag_growth", repr(float(cycle.lag_growth))),
-                     ("controller", cycle.controller), ("in_charge", cycle.in_charge),
+    if cycle.fallen:
+        values: tuple[tuple[str, str], ...] = (("fallen", cycle.fallen),)
+    else:
+        assert idx is not None
+        values = tuple((n, repr(float(getattr(idx, n)))) for n in REPORTED_NAMES)
+        values += (("lag_growth", repr(float(cycle.lag_growth))),)
+    return values + (("controller", cycle.controller), ("in_charge", cycle.in_charge),
                      ("uncommanded_ticks", str(cycle.uncommanded)), ("cycle", str(cycle.cycle)),
                      ("t_a", repr(cycle.t_a)), ("t_b", repr(cycle.t_b)))
 
@@ -286,16 +300,25 @@ def segments(cycles: Sequence[Cycle], changes: Sequence[tuple[int, str]], period
              last_tick: int) -> list[dict[str, Any]]:
     """Per stretch of one controller in charge (``changes``: (first tick, controller)), its
     full cycles and the last of them (each with its label: ``fallback``, ``mixed(...)`` if
-    the controller did not command all of it)."""
+    the controller did not command all of it), and the segment's indices: the per-cycle
+    mean over the cycles the controller commanded entirely (``mean_cycles``; model.md: not
+    the index of their union), None if it has none or one of them was not a walk
+    (``fallen`` then says which and why)."""
     out = []
     for i, (k, who) in enumerate(changes):
         end = changes[i + 1][0] if i + 1 < len(changes) else last_tick
         mine = [c for c in cycles if c.in_charge == who and c.sums is not None
                 and k * period <= c.t_a + 1e-9 and c.t_b <= max(end, k) * period + 1e-9]
+        own = [c for c in mine if c.controller == who]
+        fell = next((f"cycle {c.cycle}: {c.fallen}" for c in own if c.fallen), "")
+        scored = [c.indices for c in own if c.indices is not None]
+        mean = per_cycle_mean(scored).as_dict() if scored and not fell else None
         out.append({"controller": who, "from_tick": k,
                     "to_tick": end - 1 if i + 1 < len(changes) else last_tick,
                     "t_start": k * period,
                     "t_end": end * period, "cycles": [c.cycle for c in mine],
+                    "mean_cycles": [c.cycle for c in own], "per_cycle_mean": mean,
+                    **({"fallen": fell} if fell else {}),
                     "last_full_cycle": mine[-1].as_dict() if mine else None})
     return out
 

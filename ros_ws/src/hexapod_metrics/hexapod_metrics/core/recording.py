@@ -87,6 +87,10 @@ class ParamRecorder:
 def indices_status(cycle: Cycle) -> DiagnosticStatus:
     """One /hexapod/indices status: the seven indices of a scored gait cycle, L, the hip lag
     and its growth since the previous cycle (m per cycle), its label and who was in charge."""
+    if cycle.fallen:  # WARN, no indices: the cycle was not a walk
+        return DiagnosticStatus(name=f"hexapod/indices/{cycle.controller}",
+                                message=f"cycle {cycle.cycle}: {cycle.fallen}",
+                                hardware_id="hexapod", level=1, values=indices_values(cycle))
     return DiagnosticStatus(name=f"hexapod/indices/{cycle.controller}",
                             message=f"cycle {cycle.cycle}", hardware_id="hexapod", level=0,
                             values=indices_values(cycle))

@@ -1,10 +1,10 @@
 """Actuator saturation (paper eq. 6): T_m = clip(T_C, -T_max, +T_max); T_max = inf is ideal."""
 from __future__ import annotations
 
-from numba import njit
+from hexapod_common.core.jit import njit
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def clip_torque(v, t_max):  # type: ignore[no-untyped-def]
     """clip(v, -t_max, t_max) of one joint torque (N m)."""
     if v > t_max:

@@ -14,11 +14,12 @@ diverged case by swapping it behind them (:func:`swap_columns`).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from .body import LINKS, link_force
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
+from .sincos import cos_sin
 from .engine import W_BIAS, W_CS, W_FACTOR, W_FG, W_JAC, W_SIZE, W_W, leg_sample
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
 from hexapod_common.core.layout import (C0, P_BBX, P_BBY, P_BGX, P_BGY, P_DT, P_G, P_HIPX, P_IMPL,
@@ -30,15 +31,21 @@ from hexapod_common.core.params import N_LEGS
 #: one array never overlap, so the loops over cases vectorise with a few alias checks.
 LANES = 64
 
+#: body.LINKS as unsigned bytes: row indices that LLVM knows are >= 0 need no wraparound
+#: select (numba's negative-index handling), which would stop the loops over cases from
+#: vectorising.
+LINK_HIPS = LINKS.astype(np.uint8)
+
 
 @njit(cache=True)
 def block_scratch():  # type: ignore[no-untyped-def]
     """Work arrays of a block, B = LANES: (FH (12, B), WK (6, W_SIZE, B), FF (12, B),
-    QDD (24, B), TR (6, B) cos/sin and contact state, FLAG (B,) legs to re-solve)."""
+    QDD (24, B), TR (14, B) the body links' forces, then a leg's contact state, FLAG (B,)
+    legs to re-solve)."""
     B = LANES
     return (np.empty((2 * N_LEGS, B)), np.empty((N_LEGS, W_SIZE, B)),
-            np.empty((2 * N_LEGS, B)), np.empty((4 * N_LEGS, B)), np.empty((6, B)),
-            np.zeros(B))
+            np.empty((2 * N_LEGS, B)), np.empty((4 * N_LEGS, B)),
+            np.empty((2 * LINKS.shape[0], B)), np.zeros(B))
 
 
 @njit(cache=True)
@@ -53,11 +60,8 @@ def block_prepare(X, PT, n, FH, WK, TR):  # type: ignore[no-untyped-def]
     state part into WK."""
     x, pt, fh, wk, tr = _flat(X), _flat(PT), _flat(FH), _flat(WK), _flat(TR)
     L = LANES
-    for r in range(2 * N_LEGS):
-        for b in range(n):
-            fh[r * L + b] = 0.0
-    for k in range(LINKS.shape[0]):
-        la, lb = LINKS[k, 0], LINKS[k, 1]
+    for k in range(LINK_HIPS.shape[0]):  # each link's force on its first hip, into tr
+        la, lb = LINK_HIPS[k, 0], LINK_HIPS[k, 1]
         qa, va, qb, vb = (Q0 + 4 * la) * L, (V0 + 4 * la) * L, (Q0 + 4 * lb) * L, (V0 + 4 * lb) * L
         xa, xb = (P_HIPX + la) * L, (P_HIPX + lb) * L
         for b in range(n):
@@ -65,37 +69,43 @@ def block_prepare(X, PT, n, FH, WK, TR):  # type: ignore[no-untyped-def]
                                 x[qb + L + b], x[vb + b], x[vb + L + b], pt[xa + b], pt[xb + b],
                                 pt[P_KBX * L + b], pt[P_KBY * L + b], pt[P_BBX * L + b],
                                 pt[P_BBY * L + b])
-            fh[2 * la * L + b] += fx
-            fh[(2 * la + 1) * L + b] += fy
-            fh[2 * lb * L + b] -= fx
-            fh[(2 * lb + 1) * L + b] -= fy
+            tr[2 * k * L + b] = fx
+            tr[(2 * k + 1) * L + b] = fy
+    for r in range(2 * N_LEGS):
+        for b in range(n):
+            fh[r * L + b] = 0.0
+    for k in range(LINK_HIPS.shape[0]):  # body.body_forces' sums, in its order
+        for j in range(2):  # one row of fh and one of tr a loop: LLVM vectorises it
+            ra, rf = (2 * LINK_HIPS[k, 0] + j) * L, (2 * k + j) * L
+            rb = (2 * LINK_HIPS[k, 1] + j) * L
+            for b in range(n):
+                fh[ra + b] += tr[rf + b]
+            for b in range(n):
+                fh[rb + b] -= tr[rf + b]
     for i in range(N_LEGS):
         q, v, w = (Q0 + 4 * i) * L, (V0 + 4 * i) * L, i * W_SIZE * L
         oc, ox = (C0 + i) * L, (X0 + i) * L
         for b in range(n):
             th1 = x[q + 2 * L + b]
-            th12 = th1 + x[q + 3 * L + b]
-            tr[b] = np.cos(th1)
-            tr[L + b] = np.sin(th1)
-            tr[2 * L + b] = np.cos(th12)
-            tr[3 * L + b] = np.sin(th12)
-        for b in range(n):
-            c1, s1, c12, s12 = tr[b], tr[L + b], tr[2 * L + b], tr[3 * L + b]
+            c1, s1 = cos_sin(th1)
+            c12, s12 = cos_sin(th1 + x[q + 3 * L + b])
             w1, w2 = x[v + 2 * L + b], x[v + 3 * L + b]
             l1, l2 = pt[P_L1 * L + b], pt[P_L2 * L + b]
             dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
             xf, yf = x[q + b] + dx, x[q + L + b] + dy
             c, xt = update_contact(xf, yf, x[oc + b], x[ox + b])
-            tr[4 * L + b] = c  # into X after the loop: stores to X here would stop LLVM
-            tr[5 * L + b] = xt  # from vectorising (it cannot tell X's rows apart)
+            tr[b] = c  # into X after the loop: stores to X here would stop LLVM
+            tr[L + b] = xt  # from vectorising (it cannot tell X's rows apart)
             dvx, dvy = foot_velocity_cs(c1, s1, c12, s12, w1, w2, l1, l2)
             vx, vy = x[v + b] + dvx, x[v + L + b] + dvy
-            bx, by = pt[P_BGX * L + b], pt[P_BGY * L + b]
+            on = c != 0.0  # in flight: no ground force, the plain solve (engine.prepare)
+            bx = pt[P_BGX * L + b] if on else 0.0
+            by = pt[P_BGY * L + b] if on else 0.0
             fx, fy = spring_damper(xf, yf, vx, vy, xt, pt[P_KGX * L + b], pt[P_KGY * L + b],
                                    bx, by)
-            h = pt[P_DT * L + b] if pt[P_IMPL * L + b] != 0.0 else 0.0
-            if c == 0.0:  # in flight: no ground force, the plain solve (engine.prepare)
-                fx, fy, bx, by, h = 0.0, 0.0, 0.0, 0.0, 0.0
+            fx = fx if on else 0.0
+            fy = fy if on else 0.0
+            h = pt[P_DT * L + b] if on and pt[P_IMPL * L + b] != 0.0 else 0.0
             factor, bias, jac = leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2,
                                               pt[P_MH * L + b], pt[P_MK * L + b],
                                               pt[P_MF * L + b], pt[P_G * L + b], bx, by, h)
@@ -115,8 +125,8 @@ def block_prepare(X, PT, n, FH, WK, TR):  # type: ignore[no-untyped-def]
             f = w + W_W * L + b
             wk[f], wk[f + L] = w1, w2
         for b in range(n):
-            x[oc + b] = tr[4 * L + b]
-            x[ox + b] = tr[5 * L + b]
+            x[oc + b] = tr[b]
+            x[ox + b] = tr[L + b]
 
 
 @njit(cache=True, error_model="numpy")

@@ -11,7 +11,7 @@ and the opposite force acts on b. Legs are 0-based here.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from hexapod_common.core.layout import P_BBX, P_BBY, P_HIPX, P_KBX, P_KBY, Q0, V0
 from hexapod_common.core.params import N_LEGS
@@ -19,7 +19,7 @@ from hexapod_common.core.params import N_LEGS
 LINKS = np.array([[0, 1], [2, 3], [4, 5], [0, 2], [2, 4], [1, 3], [3, 5]], dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def link_force(xa, ya, vxa, vya, xb, yb, vxb, vyb, x0a, x0b, kx, ky, bx,  # type: ignore[no-untyped-def]
                by):
     """Force (N) of the link (a, b) on hip a (hip b feels the opposite): hips at (xa, ya),

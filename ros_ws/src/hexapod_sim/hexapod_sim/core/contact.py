@@ -14,10 +14,10 @@ gives the law at a given velocity (:func:`spring_damper`), the contact state
 """
 from __future__ import annotations
 
-from numba import njit
+from hexapod_common.core.jit import njit
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def update_contact(x, y, in_contact, x_touch):  # type: ignore[no-untyped-def]
     """New (in_contact, x_touch) for a foot at (x, y) (m): store x_0 at touchdown, forget it
     when the foot is at or above the ground."""
@@ -28,7 +28,7 @@ def update_contact(x, y, in_contact, x_touch):  # type: ignore[no-untyped-def]
     return 1.0, x_touch
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def limit_force(fx, fy, mu):  # type: ignore[no-untyped-def]
     """Apply 'the ground never pulls' and, if mu > 0, the Coulomb limit |F_x| <= mu F_y."""
     if fy < 0.0:
@@ -42,7 +42,7 @@ def limit_force(fx, fy, mu):  # type: ignore[no-untyped-def]
     return fx, fy
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def spring_damper(x, y, vx, vy, x_touch, kx, ky, bx, by):  # type: ignore[no-untyped-def]
     """The unlimited law of a foot in contact at (x, y) (m) moving at (vx, vy) (m/s), with
     touchdown point x_touch (m): (F_x, F_y) in N, before :func:`limit_force`.

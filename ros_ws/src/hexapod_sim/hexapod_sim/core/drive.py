@@ -24,7 +24,7 @@ as holding the saturated torque over the period (engine.advance_prepared).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from .actuator import clip_torque
 from .engine import euler_step, prepare, solve, state_ok

@@ -13,7 +13,7 @@ Everything is written in scalars so that numba compiles it to allocation-free co
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 
 @njit(cache=True)
@@ -23,7 +23,7 @@ def leg_terms(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav):  # type: ignore[no-un
                         w1, w2, l1, l2, mh, mk, mf, grav)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def leg_terms_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf,  # type: ignore[no-untyped-def]
                  grav):
     """Mass matrix and bias of one leg, given cos/sin of theta1 and of theta1 + theta2.
@@ -53,7 +53,7 @@ def leg_terms_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf,  # type: ignore[n
     return m, h02, h03, h12, h13, h22, h23, h33, bias0, bias1, bias2, bias3
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def factor_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):  # type: ignore[no-untyped-def]
     """LDL^T factor of a symmetric positive definite 4x4 A (upper triangle given).
 
@@ -72,7 +72,7 @@ def factor_spd4(a00, a01, a02, a03, a11, a12, a13, a22, a23, a33):  # type: igno
     return d0, d1, d2, d3, l10, l20, l30, l21, l31, l32
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def subst_spd4(f, r0, r1, r2, r3):  # type: ignore[no-untyped-def]
     """Solve A x = r given the factor ``f`` of A from :func:`factor_spd4`."""
     d0, d1, d2, d3, l10, l20, l30, l21, l31, l32 = f
@@ -103,7 +103,7 @@ def leg_accel(th1, th2, w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2,  # type: ign
                         w1, w2, l1, l2, mh, mk, mf, grav, tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ignore[no-untyped-def]
                   bx, by, h):
     """The state part of :func:`leg_accel_cs`: everything that does not depend on forces.
@@ -127,7 +127,7 @@ def leg_system_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: i
     return factor, (bb0, bb1, bb2, bb3), (af, bf, a2, b2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, ffx, ffy):  # type: ignore[no-untyped-def]
     """The force part of :func:`leg_accel_cs`: ddq from the state part of
     :func:`leg_system_cs`, joint torques tm1, tm2 (N m), the body force (fhx, fhy) on the hip
@@ -138,7 +138,7 @@ def leg_solve(factor, bias, jac, tm1, tm2, fhx, fhy, ffx, ffy):  # type: ignore[
                       tm1 + af * ffx + bf * ffy - bb2, tm2 + a2 * ffx + b2 * ffy - bb3)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def leg_accel_cs(c1, s1, c12, s12, w1, w2, l1, l2, mh, mk, mf, grav,  # type: ignore[no-untyped-def]
                  tm1, tm2, fhx, fhy, ffx, ffy, bx, by, h):
     """ddq of one leg (cos/sin of theta1 and theta1 + theta2 given) from

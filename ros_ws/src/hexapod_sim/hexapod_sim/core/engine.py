@@ -34,11 +34,12 @@ free to call. docs/benchmarks.md, S1 and S3.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from .body import body_forces
 from .contact import limit_force, spring_damper, update_contact
 from .dynamics import leg_accel_cs, leg_solve, leg_system_cs
+from .sincos import cos_sin
 from .uneven_ground import ground_factors, note_touchdown
 from hexapod_common.core.gait import reference
 from hexapod_common.core.kinematics import foot_offset_cs, foot_velocity_cs
@@ -88,7 +89,8 @@ def prepare(s, P, fh, work):  # type: ignore[no-untyped-def]
     for i in range(N_LEGS):
         qi, vi = Q0 + 4 * i, V0 + 4 * i  # leg i's (x_H, y_H, theta1, theta2) and rates
         th1, th12, w1, w2 = s[qi + 2], s[qi + 2] + s[qi + 3], s[vi + 2], s[vi + 3]
-        c1, s1, c12, s12 = np.cos(th1), np.sin(th1), np.cos(th12), np.sin(th12)
+        c1, s1 = cos_sin(th1)
+        c12, s12 = cos_sin(th12)
         dx, dy = foot_offset_cs(c1, s1, c12, s12, l1, l2)
         x, y = s[qi] + dx, s[qi + 1] + dy
         c, xt = update_contact(x, y, s[C0 + i], s[X0 + i])
@@ -246,7 +248,7 @@ if SAMPLE_ORDER != OBS_FIELDS:  # pragma: no cover - a layout change must update
     raise ImportError("engine.leg_sample no longer matches layout.OBS_FIELDS")
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def leg_sample(xh, yh, th1, th2, vxh, vyh, w1, w2, c1, s1, c12, s12,  # type: ignore[no-untyped-def]
                tq1, tq2, ffx, ffy, ddxh, ddyh, fhx, fhy, l1, l2, mh, grav):
     """One leg's observation, the 18 values of obs[:, i, :] in OBS_FIELDS order.

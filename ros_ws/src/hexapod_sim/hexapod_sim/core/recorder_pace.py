@@ -9,11 +9,13 @@ written (``/hexapod/recorded``: the stamp of its newest joint state, every
 ``topics.RECORDER_LAG`` ticks behind it. When the writers of that progress change during a
 hold (a recorder closed, or dropped by its peers when its lease ran out; or one joined,
 which records nothing while the sim holds), or when the recorder is silent for
-``patience`` wall s (stuck), nobody is waited for until a recorder speaks again. Realtime
+``patience`` wall s (stuck; while its process is alive, up to a longer cap: a stopped or
+starved recorder is waited for), nobody is waited for until a recorder speaks again. Realtime
 runs keep their clock and never hold.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 
@@ -33,6 +35,8 @@ class RecorderPace:
     holds: int = 0
     held_s: float = 0.0
     gave_up: int = 0
+    #: Holds ended because the recorder had left the graph (``alive()`` said so).
+    left: int = 0
     _since: float | None = None
 
     def heard(self, tick: int, now: float, current: int) -> None:
@@ -43,13 +47,29 @@ class RecorderPace:
         self.recorded = tick if self.recorded is None else max(self.recorded, tick)
         self.heard_at = now
 
-    def hold_until(self, tick: int, now: float) -> float | None:
+    def behind(self, tick: int) -> bool:
+        """Whether ``tick`` would be held: the recorder was heard and is more than ``lag``
+        ticks behind it."""
+        return self.recorded is not None and tick - self.recorded > self.lag
+
+    def hold_until(self, tick: int, now: float, alive: Callable[[], bool] | None = None,
+                   cap: float = 0.0) -> float | None:
         """None: ``tick`` may go out now. Else it is held: look again when the recorder is
-        heard or at the returned time (when the sim gives up waiting)."""
-        if self.recorded is None or tick - self.recorded <= self.lag:
+        heard or at the returned time (when the sim gives up waiting). ``alive()`` (asked
+        once it has been silent for ``patience``): whether the recorder is still on the
+        graph; if so its silence is borne up to ``cap`` wall s, if not the hold ends as for
+        a recorder that left (:meth:`forget`, counted in :attr:`left`)."""
+        if not self.behind(tick):
             self._release(now)
             return None
-        give_up_at = self.heard_at + self.patience
+        patience = self.patience
+        if alive is not None and now >= self.heard_at + patience:
+            if not alive():  # it has left the graph: nobody to wait for, nothing given up
+                self.left += 1
+                self.forget(now)
+                return None
+            patience = max(cap, patience)
+        give_up_at = self.heard_at + patience
         if now >= give_up_at:
             self.gave_up += 1
             self.recorded = None  # until the recorder speaks again

@@ -7,9 +7,12 @@ and every expired wait (:meth:`timeout` in lockstep, :meth:`period_end` in realt
 Times are wall seconds (``time.monotonic``), stamps integer nanoseconds of simulated time.
 
 * lockstep: tick k+1 is computed as soon as the command of tick k is applied (and sent at
-  once, or, with ``sim.lockstep_max_rtf`` > 0, not before :meth:`release_at`); without it
-  within ``sim.lockstep_timeout`` the tick is *missed* and the last torque *held*; while the
-  controller is silent, each tick waits one period; after ``sim.hold_time`` of silence the
+  once, or, with ``sim.lockstep_max_rtf`` > 0, not before :meth:`release_at`). A tick waits
+  for its command while the nodes it needs are alive (the shell says: :meth:`waiting`, asked
+  every :data:`LIVENESS_LOOK` s), up to ``sim.lockstep_timeout`` (a cap, reported when hit):
+  a stopped or starved process delays the run, it does not change it. Once they have left
+  (or the cap is hit) the tick is *missed* and the last torque *held*; while the controller
+  is silent, each tick waits one period; after ``sim.hold_time`` of silence the
   torque is the joint-damping *fallback* -sim.fallback_damping * dtheta (saturated). The first
   valid command ends both.
 * realtime: ticks are due at t0 + k * period (tick 0 waits as in lockstep and starts the
@@ -47,6 +50,12 @@ SWITCH_WINDOW = 3    # ticks after a switch whose misses count as caused by it
 LATENCY_BIN = 20e-6  # s: histogram of state -> command round trips, bins of 20 us ...
 LATENCY_BINS = 2500  # ... up to 50 ms (the last bin collects the rest)
 MAX_RANGES = 10000   # tick ranges kept of uncommanded torques
+#: Wall s between two looks, while a lockstep tick waits for its command, at whether the
+#: nodes it needs are still alive; a tick whose nodes have left is missed after this long.
+LIVENESS_LOOK = 0.5
+#: Wall s realtime's tick 0 waits for its command (the first messages of every connection
+#: are slow) before the schedule starts without it.
+FIRST_TICK_WAIT = 0.5
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -126,6 +135,11 @@ class TickMachine:
         self.started = False
         self.finished = False
         self.missed = self.late = self.on_time = self.foreign = self.resyncs = 0
+        # lockstep: ticks that waited past the first look for a living controller, the
+        # longest such wait (wall s), and how often the cap (sim.lockstep_timeout) was hit
+        self.long_waits = self.cap_hits = 0
+        self.longest_wait = 0.0
+        self._long_wait_tick = -1
         self.silent_ticks = 0
         # Never log per tick: lockstep warns at the first timeout, realtime after 10 ms.
         self.warn_after = 1 if self.mode == "lockstep" else max(1, round(0.01 / self.period))
@@ -185,12 +199,13 @@ class TickMachine:
             self.finished = True
             return Wait.STOP, now
         if self.mode == "lockstep":
-            wait = self.period if self.silent_ticks else self.params().sim.lockstep_timeout
+            cap = self.params().sim.lockstep_timeout
+            wait = self.period if self.silent_ticks else min(LIVENESS_LOOK, cap)
             return Wait.TIMEOUT, now + wait
         if k == 0:
-            # Realtime: tick 0 waits like lockstep (the first messages of every connection
-            # are slow); the wall-clock schedule starts when its command arrives.
-            return Wait.PERIOD_END, now + self.params().sim.lockstep_timeout
+            # Realtime: tick 0 waits a little (the first messages of every connection are
+            # slow); the wall-clock schedule starts when its command arrives.
+            return Wait.PERIOD_END, now + FIRST_TICK_WAIT
         due = self.t0 + (k + 1) * self.period
         if now - due > RESYNC_TICKS * self.period:
             self.resyncs += 1
@@ -244,6 +259,29 @@ class TickMachine:
             self.t0 = now - self.period
             return Outcome.SCHEDULE
         return Outcome.READY
+
+    def waiting(self, now: float, alive: bool) -> float | None:
+        """Lockstep, at the deadline of :meth:`sent`: whether the current tick waits longer
+        for its command. ``alive``: the controller in charge and the nodes its command needs
+        are still running (the shell knows). The wall time to look again, or None: the tick
+        is missed (call :meth:`timeout`): its nodes have left, the controller was already
+        silent, or ``sim.lockstep_timeout`` has passed since the tick went out (said once)."""
+        if self.silent_ticks or not alive or self.answered:
+            return None
+        cap = self.params().sim.lockstep_timeout
+        waited = now - self.published_at
+        if self._long_wait_tick != self.prepared_tick:
+            self._long_wait_tick = self.prepared_tick
+            self.long_waits += 1
+        self.longest_wait = max(self.longest_wait, waited)
+        if waited < cap:
+            return min(self.published_at + cap, now + LIVENESS_LOOK)
+        self.cap_hits += 1
+        self.log.warning(
+            f"waited {waited:.1f} s for {self.in_charge}'s command of tick {self.tick} "
+            f"while it is alive: sim.lockstep_timeout ({cap:g} s) reached, counting the tick "
+            f"missed")
+        return None
 
     def timeout(self) -> None:
         """Lockstep: no command for the current tick in time (then publish the next)."""
@@ -371,6 +409,8 @@ class TickMachine:
                 "mode": self.mode, "started": self.started, "finished": self.finished,
                 "controller": self.in_charge, "missed": self.missed, "late": self.late,
                 "on_time": self.on_time, "foreign": self.foreign,
+                "long_waits": self.long_waits, "longest_wait_s": round(self.longest_wait, 3),
+                "cap_hits": self.cap_hits,
                 "fallback_episodes": self.fallback_episodes, "switches": self.switch_log,
                 "missed_after_switch": self.missed_after_switch,
                 "not_commanded_ticks": self.not_commanded,

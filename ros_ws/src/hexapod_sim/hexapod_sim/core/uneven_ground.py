@@ -30,7 +30,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from hexapod_common.core.jit import njit
 
 from hexapod_common.core.errors import ParameterError
 from hexapod_common.core.layout import STATE_SIZE
