@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import stat
 import subprocess
@@ -221,11 +222,22 @@ def assert_uncommanded_cycles_are_labelled(s: Script, controller: str) -> None:
     assert any(c["uncommanded_ticks"] > 0 for c in cycles), cycles
     for c in cycles:
         assert (c["label"] == controller) == (c["uncommanded_ticks"] == 0), c
-    last = doc["segments"][-1]["last_full_cycle"]
+    # The table's row is the per-cycle mean over the cycles the controller commanded
+    # entirely, and names them; with none, it names the last cycle's label and no numbers.
+    seg = doc["segments"][-1]
     row = table_rows(s.stdout())[-1]
-    assert row.startswith(last["label"] + " "), row  # 'mixed(pd_pf+376 uncommanded) ...'
-    if last["uncommanded_ticks"]:
-        assert row.split()[0] in ("fallback", "held") or row.startswith(f"mixed({controller}+")
+    own = seg["mean_cycles"]
+    by_number = {c["cycle"]: c for c in cycles}
+    if own:
+        assert row.startswith(controller + " "), row
+        assert all(by_number[k]["uncommanded_ticks"] == 0 for k in own), (own, cycles)
+        span = f"{len(own)}: {own[0]}-{own[-1]}" if len(own) > 1 else f"1: {own[0]}"
+        assert f" {span} " in row, row
+        assert len(own) < len(seg["cycles"])  # the fallback's cycles are left out
+    else:
+        last = seg["last_full_cycle"]
+        assert row.startswith(last["label"] + " "), row  # 'mixed(pd_pf+376 uncommanded) ...'
+        assert "no cycle commanded entirely" in row, row
     # The bag says the same: `hexapod analyze` labels each cycle as the metrics node did
     # online (its /hexapod/indices records in the bag) and as indices.json.
     from hexapod_metrics.core.analysis import analyze_bag
@@ -259,7 +271,10 @@ def test_fallback_alone_exits_7(script, tmp_path):
     fell = [c for c in cycles if c.get("fallen")]
     assert fell and all(c["indices"] is None and c["label"] != "pd_p" for c in fell)
     assert cycles[0]["indices"] is not None and not cycles[0].get("fallen")
-    assert "no indices: fallen: hip height" in table_rows(s.stdout())[-1]
+    row = table_rows(s.stdout())[-1]
+    assert row.startswith("pd_p ") and " 1: 0 " in row, row  # its one clean cycle, no other
+    assert re.search(r"\^ \d+ other cycles of this segment fallen \(no indices\), the first: "
+                     r"cycle \d+ \(fallback\): hip height", s.stdout()), s.stdout()
     # the transition a ROS tool made is in the bag: the controller's status says it, at once
     from hexapod_common.core import cdr
     from hexapod_metrics.bag import open_bag

@@ -24,6 +24,7 @@ from hexapod_common.core import topics as T
 
 from .conftest import hexapod_cli
 from .test_graph_exits import Script, table_rows
+from .test_graph_join import profile_file
 
 #: One worker runs the module (its module-scoped fixture once): scripts/test.sh uses
 #: pytest-xdist's loadgroup distribution.
@@ -63,10 +64,14 @@ def seen(tmp_path_factory):
         s.wait_log("hexapod_sim", "lockstep mode")
         out["text"] = _status(s).stdout
         out["json"] = _status_json(s)
-        # A rogue on the domain: its commands are dropped, it is named while it is there.
+        # A rogue on the domain with the run's DDS profile (it read the join line, it has
+        # no key): its commands reach the sim and are dropped, it is named while it is
+        # there. (One without the profile is kept out by the run's partition unheard:
+        # test_graph_hostile.py.)
         log = open(tmp / "rogue.log", "wb")
         env = {**os.environ, "ROS_DOMAIN_ID": str(s.domain),
-               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+               "FASTRTPS_DEFAULT_PROFILES_FILE": profile_file(s)}
         rogue = subprocess.Popen([sys.executable, str(HOSTILE), "rogue", "--out",
                                   str(tmp / "rogue.json"), "--name", ROGUE[1:]],
                                  env=env, stdout=log, stderr=subprocess.STDOUT,

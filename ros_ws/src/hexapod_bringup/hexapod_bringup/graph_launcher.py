@@ -672,6 +672,7 @@ def indices_lines(path: Path) -> list[str]:
     names = doc["index_names"]
     changes = doc.get("parameter_changes") or []
     t_of = {c["cycle"]: (c["t_a"], c["t_b"]) for c in doc.get("cycles", ())}
+    fell_in = {c["cycle"]: c for c in doc.get("cycles", ()) if c.get("fallen")}
     out = ["indices per controller segment (per-cycle mean of the full gait cycles it "
            "commanded):",
            f"  {'controller':<24} {'segment [s]':<16} {'cycles':<12}"
@@ -695,6 +696,14 @@ def indices_lines(path: Path) -> list[str]:
         span = f"{len(own)}: {own[0]}-{own[-1]}" if len(own) > 1 else f"1: {own[0]}"
         row = "".join(f"{mean[n]:>11.4g}" for n in names)
         out.append(f"  {s['controller']:<24} {seg:<16} {span:<12}{row}")
+        # cycles of the segment it did not command that were not a walk (a fallback's):
+        # left out of the mean, and named here without numbers
+        fell = [fell_in[k] for k in s.get("cycles", ()) if k in fell_in and k not in own]
+        if fell:
+            c0 = fell[0]
+            out.append(f"    ^ {len(fell)} other cycles of this segment fallen (no indices), "
+                       f"the first: cycle {c0['cycle']} ({c0.get('label', '?')}): "
+                       f"{c0['fallen'].removeprefix('fallen: ')}")
         # live parameter changes: the mean then mixes two settings; before its cycles (in
         # this segment) they are the new setting's, not the segment start's
         t_a, t_b = t_of[own[0]][0], t_of[own[-1]][1]
