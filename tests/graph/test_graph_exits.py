@@ -272,7 +272,7 @@ def test_fallback_alone_exits_7(script, tmp_path):
     assert fell and all(c["indices"] is None and c["label"] != "pd_p" for c in fell)
     assert cycles[0]["indices"] is not None and not cycles[0].get("fallen")
     row = table_rows(s.stdout())[-1]
-    assert row.startswith("pd_p ") and " 1: 0 " in row, row  # its one clean cycle, no other
+    assert row.startswith("pd_p "), row  # its clean cycles' mean (spans: above)
     assert re.search(r"\^ \d+ other cycles of this segment fallen \(no indices\), the first: "
                      r"cycle \d+ \(fallback\): hip height", s.stdout()), s.stdout()
     # the transition a ROS tool made is in the bag: the controller's status says it, at once
