@@ -1,0 +1,52 @@
+"""vector_width.py: which width numba's code generator is given, by host and by setting.
+Each case in a new interpreter (the choice is made once, before anything compiles)."""
+import json
+import os
+import subprocess
+import sys
+
+import llvmlite.binding as ll
+
+PROBE = ("import json; from hexapod_common.core import jit; "
+         "from hexapod_common.core.vector_width import force_avx2_width, prefer_512_bit; "
+         "from numba.core import config; "
+         "print(json.dumps([force_avx2_width(), config.CPU_FEATURES]))")
+
+
+def _probe(**env: str) -> tuple[bool, str | None]:
+    full = {k: v for k, v in os.environ.items()
+            if k not in ("HEXAPOD_VECTOR_WIDTH", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    out = subprocess.run([sys.executable, "-c", PROBE], env={**full, **env},
+                         capture_output=True, text=True, check=True).stdout
+    forced, features = json.loads(out)
+    return forced, features
+
+
+def test_the_width_follows_the_host_and_a_users_choice_wins():
+    host = ll.get_host_cpu_features()
+    avx512, avx2 = host.get("avx512f", False), host.get("avx2", False)
+    forced, features = _probe()
+    assert forced == (avx2 and not avx512)
+    assert (features is not None and features.endswith(",-prefer-256-bit")) == avx512
+    # the user's choice wins: LLVM's own width, or numba's CPU named
+    assert _probe(HEXAPOD_VECTOR_WIDTH="native") == (False, None)
+    forced, _ = _probe(NUMBA_CPU_NAME="generic")
+    assert forced is False
+
+
+def test_the_batched_numbers_do_not_depend_on_the_width(tmp_path):
+    """A batched sweep gives the same numbers bit for bit at LLVM's own width and at the one
+    chosen here (a lane does the same IEEE operations), each compiled afresh."""
+    code = ("import json; from hexapod_common.core.params import load_params; "
+            "from hexapod_bringup.core.experiments import ground_sweep; "
+            "from hexapod_bringup.core.parallel import InlineBackend; "
+            "r = ground_sweep(load_params(), [30.0, 300.0], 400.0, "
+            "controllers=('pd_p', 'pd_pf'), duration=1.5, backend=InlineBackend()); "
+            "print(json.dumps(r.rows(), sort_keys=True, default=repr))")
+    outs = []
+    for width in ("native", ""):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{width}"),
+               "HEXAPOD_VECTOR_WIDTH": width}
+        outs.append(subprocess.run([sys.executable, "-c", code], env=env,
+                                   capture_output=True, text=True, check=True).stdout)
+    assert outs[0] == outs[1] and '"E_av"' in outs[0]
