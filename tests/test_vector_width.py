@@ -28,6 +28,9 @@ def test_the_width_follows_the_host_and_a_users_choice_wins():
     forced, features = _probe()
     assert forced == (avx2 and not avx512)
     assert (features is not None and features.endswith(",-prefer-256-bit")) == avx512
+    # forced: the same features under another name (numba's cache key), so code compiled
+    # at LLVM's own width is not loaded
+    assert (features is not None and features.endswith(",+avx2")) == forced
     # the user's choice wins: LLVM's own width, or numba's CPU named
     assert _probe(HEXAPOD_VECTOR_WIDTH="native") == (False, None)
     forced, _ = _probe(NUMBA_CPU_NAME="generic")
@@ -50,3 +53,25 @@ def test_the_batched_numbers_do_not_depend_on_the_width(tmp_path):
         outs.append(subprocess.run([sys.executable, "-c", code], env=env,
                                    capture_output=True, text=True, check=True).stdout)
     assert outs[0] == outs[1] and '"E_av"' in outs[0]
+
+
+def test_a_fresh_compile_prints_no_loop_remarks_and_keeps_other_stderr(tmp_path):
+    """A forced width makes LLVM print a remark for every loop it cannot vectorise; none
+    reaches the user, and what else goes to stderr while numba compiles still does."""
+    code = ("import sys; from hexapod_common.core.jit import njit\n"
+            "@njit(cache=True)\n"
+            "def first_negative(a):\n"
+            "    for i in range(a.size):\n"
+            "        if a[i] < 0.0:\n"
+            "            return i\n"
+            "    return -1\n"
+            "import numpy as np\n"
+            "print(first_negative(np.array([1.0, -2.0])))\n"
+            "print('still here', file=sys.stderr)\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    script = tmp_path / "early_exit.py"
+    script.write_text(code)
+    r = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True,
+                       check=True)
+    assert r.stdout.strip() == "1"
+    assert "remark:" not in r.stderr and "still here" in r.stderr, r.stderr

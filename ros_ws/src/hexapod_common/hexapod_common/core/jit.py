@@ -1,5 +1,6 @@
 """numba's compiler as the project's compiled code uses it: ``njit`` and ``prange``, with
-512-bit vectors on AVX-512 hosts and 4-double ones forced on AVX2 hosts (vector_width.py) set up before anything compiles.
+512-bit vectors on AVX-512 hosts and 4-double ones forced on AVX2 hosts (vector_width.py),
+set up before anything compiles.
 
 Every module with compiled code imports them from here, so the vector width is chosen by
 the first such import; modules without compiled code (the parameter table, the topic

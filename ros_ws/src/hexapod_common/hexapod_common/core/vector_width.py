@@ -21,6 +21,10 @@ from __future__ import annotations
 
 import os
 import platform
+import re
+import sys
+import tempfile
+import threading
 from typing import Any
 
 
@@ -48,6 +52,45 @@ def prefer_512_bit() -> bool:
 
 
 _FORCED: list[bool] = []
+#: What LLVM prints for each loop it cannot vectorise once a width is forced (its remarks
+#: are then always printed, to the C stderr).
+_REMARK = re.compile(rb"^remark: .*(vectoriz|interleav)")
+
+
+def _quiet_loop_remarks() -> None:
+    """While numba compiles (its compiler lock), the process's stderr goes to a temporary
+    file; afterwards everything but LLVM's loop-vectorisation remarks is written back."""
+    from numba.core import event
+
+    lock = threading.Lock()
+    state: dict[str, Any] = {"depth": 0}
+
+    class Quiet(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            with lock:
+                state["depth"] += 1
+                if state["depth"] == 1:
+                    sys.stderr.flush()
+                    state["saved"] = os.dup(2)
+                    state["file"] = tempfile.TemporaryFile()
+                    os.dup2(state["file"].fileno(), 2)
+
+        def on_end(self, ev: Any) -> None:
+            with lock:
+                state["depth"] -= 1
+                if state["depth"] == 0:
+                    sys.stderr.flush()
+                    os.dup2(state["saved"], 2)
+                    os.close(state["saved"])
+                    f = state.pop("file")
+                    f.seek(0)
+                    kept = [line for line in f.read().splitlines(keepends=True)
+                            if not _REMARK.match(line)]
+                    f.close()
+                    if kept:
+                        os.write(2, b"".join(kept))
+
+    event.register("numba:compiler_lock", Quiet())  # type: ignore[no-untyped-call]
 
 
 def force_avx2_width() -> bool:
@@ -71,6 +114,10 @@ def force_avx2_width() -> bool:
             features = {}
         if features.get("avx2", False) and not features.get("avx512f", False):
             ll.set_option("hexapod", "-force-vector-width=4")
+            # the same features under another name: numba's on-disk cache is keyed on them,
+            # so code compiled before at LLVM's own width is not loaded for this
+            config.CPU_FEATURES = features.flatten() + ",+avx2"
+            _quiet_loop_remarks()
             forced = True
     _FORCED.append(forced)
     return forced
