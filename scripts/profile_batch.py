@@ -233,8 +233,12 @@ def main(argv: list[str] | None = None) -> int:
     import hexapod_common.core  # noqa: F401  (512-bit vectors before anything compiles)
     from numba.core import config
 
+    from hexapod_common.core.vector_width import force_avx2_width
+
     wide = (config.CPU_FEATURES or "").endswith("-prefer-256-bit")
-    print("vectors: " + ("512-bit preferred" if wide else "LLVM's default (256-bit on AVX-512)"))
+    print("vectors: " + ("512-bit preferred" if wide else
+                         "4 doubles forced (AVX2 host)" if force_avx2_width() else
+                         "LLVM's own choice"))
     profile(args.reps)
     if not args.no_asm:
         vector_report()

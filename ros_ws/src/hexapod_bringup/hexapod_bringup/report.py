@@ -78,10 +78,10 @@ class Plan:
                     ideal_percents=(100.0, 500.0), tune_factors=(0.75, 1.0),
                     kp1_values=(20000.0, 100000.0), rates=(1000.0, 10000.0),
                     rate_percents=(100.0, 300.0), rate_t_max=(400.0,),
-                    e8_percents=(100.0, 500.0), e8_spreads=(0.0, 30.0), e8_t_max=(400.0,),
+                    e8_percents=(100.0, 500.0), e8_spreads=(30.0,), e8_t_max=(400.0,),
                     e8_seeds=3, cmaes_budget=16, e7_percents=(500.0,),
                     e7_t_max=(400.0,), e7_alphas=(0.75, 1.0, 1.25),
-                    e9_percents=(10.0, 100.0, 1000.0), e9_t_max=(400.0,))
+                    e9_percents=(100.0, 1000.0), e9_t_max=(400.0,))
 
 
 def _no_progress(label: str, total: int) -> Callable[[int], None]:
