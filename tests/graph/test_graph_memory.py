@@ -9,11 +9,13 @@ from pathlib import Path
 from graph.conftest import RECORDED_RUN, finish_recorded_run, start_recorded_run
 
 NODES = ("hexapod_sim",) + RECORDED_RUN
-#: Growth allowed per node between a third of the run and its end (MB). The recorder used to
-#: keep about twice what it wrote (~2.5 MB per simulated second here) and far more as the
-#: chunks piled up; the bounded windows of replay protection (msg_auth.REPLAY_WINDOW) fill
-#: within the run's first seconds.
-MAX_GROWTH_MB = 25.0
+#: Growth allowed per node between a third of the run and its end (MB): R6's bound. The
+#: recorder used to keep about twice what it wrote (~2.5 MB per simulated second here, ~70 MB
+#: over this span) and far more as the chunks piled up. What may still grow is bounded: the
+#: windows of replay protection (msg_auth.REPLAY_WINDOW) fill within the run's first seconds,
+#: and the recorder's DDS reader queues (dds_profile: at most 20000 samples each) fill further
+#: when a loaded machine lets it fall behind (32 MB seen with a soak run beside the suite).
+MAX_GROWTH_MB = 50.0
 DURATION = 40.0
 #: Growth is measured from the sample after this cycle was scored (10 s simulated).
 BASE_CYCLE = 10
