@@ -68,28 +68,27 @@ class ChannelService:
             sim.create_timer(IDLE_LOOK, self._idle, clock=sim.steady)
 
     # ------------------------------------------------------------------ clients
-    def state_client(self, node: str) -> Any:
-        """The (kept) client of node ``node``'s lifecycle ``get_state`` service: a client
-        made at request time may send before the service has matched it, and wait forever."""
-        from lifecycle_msgs.srv import GetState
-
-        client = self.state_clients.get(node)
+    def _kept_client(self, kept: dict[str, Any], srv_type: Any, service: str) -> Any:
+        """The client of ``service`` kept in ``kept``, made (and the wait set refreshed) on
+        first use: a client made at request time may send before the service has matched
+        it, and wait forever."""
+        client = kept.get(service)
         if client is None:
-            client = self.state_clients[node] = self.sim.create_client(
-                GetState, f"/{node}/get_state")
+            client = kept[service] = self.sim.create_client(srv_type, service)
             self.sim.loop.refresh()
         return client
+
+    def state_client(self, node: str) -> Any:
+        """The (kept) client of node ``node``'s lifecycle ``get_state`` service."""
+        from lifecycle_msgs.srv import GetState
+
+        return self._kept_client(self.state_clients, GetState, f"/{node}/get_state")
 
     def change_client(self, node: str) -> Any:
         """The (kept) client of node ``node``'s lifecycle ``change_state`` service."""
         from lifecycle_msgs.srv import ChangeState
 
-        client = self.change_clients.get(node)
-        if client is None:
-            client = self.change_clients[node] = self.sim.create_client(
-                ChangeState, f"/{node}/change_state")
-            self.sim.loop.refresh()
-        return client
+        return self._kept_client(self.change_clients, ChangeState, f"/{node}/change_state")
 
     # ------------------------------------------------------------------ serving
     @property
