@@ -13,12 +13,15 @@ PROBE = ("import json; from hexapod_common.core import jit; "
          "print(json.dumps([force_avx2_width(), config.CPU_FEATURES]))")
 
 
-def _probe(**env: str) -> tuple[bool, str | None]:
+def _run_probe(**env: str) -> subprocess.CompletedProcess:
     full = {k: v for k, v in os.environ.items()
             if k not in ("HEXAPOD_VECTOR_WIDTH", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
-    out = subprocess.run([sys.executable, "-c", PROBE], env={**full, **env},
-                         capture_output=True, text=True, check=True).stdout
-    forced, features = json.loads(out)
+    return subprocess.run([sys.executable, "-c", PROBE], env={**full, **env},
+                          capture_output=True, text=True, check=True)
+
+
+def _probe(**env: str) -> tuple[bool, str | None]:
+    forced, features = json.loads(_run_probe(**env).stdout)
     return forced, features
 
 
@@ -35,6 +38,14 @@ def test_the_width_follows_the_host_and_a_users_choice_wins():
     assert _probe(HEXAPOD_VECTOR_WIDTH="native") == (False, None)
     forced, _ = _probe(NUMBA_CPU_NAME="generic")
     assert forced is False
+
+
+def test_an_unknown_width_is_one_warning_line_and_the_default():
+    r = _run_probe(HEXAPOD_VECTOR_WIDTH="512bits")
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert lines == ["warning: HEXAPOD_VECTOR_WIDTH='512bits' is none of '', '256', "
+                     "'native': ignored"], r.stderr
+    assert tuple(json.loads(r.stdout)) == _probe()
 
 
 def test_the_batched_numbers_do_not_depend_on_the_width(tmp_path):

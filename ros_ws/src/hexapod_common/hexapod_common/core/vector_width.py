@@ -52,6 +52,9 @@ def prefer_512_bit() -> bool:
 
 
 _FORCED: list[bool] = []
+#: HEXAPOD_VECTOR_WIDTH's values: unset or empty (this module's choice), 256 (LLVM's width on
+#: AVX-512 hosts), native (LLVM's own choice everywhere).
+WIDTH_CHOICES = ("", "256", "native")
 #: What LLVM prints for each loop it cannot vectorise once a width is forced (its remarks
 #: are then always printed, to the C stderr).
 _REMARK = re.compile(rb"^remark: .*(vectoriz|interleav)")
@@ -104,6 +107,10 @@ def force_avx2_width() -> bool:
     if _FORCED:
         return _FORCED[0]
     forced = False
+    chosen = os.environ.get("HEXAPOD_VECTOR_WIDTH", "")
+    if chosen not in WIDTH_CHOICES:
+        print(f"warning: HEXAPOD_VECTOR_WIDTH={chosen!r} is none of "
+              f"{', '.join(repr(c) for c in WIDTH_CHOICES)}: ignored", file=sys.stderr)
     if (os.environ.get("HEXAPOD_VECTOR_WIDTH") != "native" and config.CPU_NAME is None
             and config.CPU_FEATURES is None and platform.machine() in ("x86_64", "AMD64")):
         import llvmlite.binding as ll
@@ -123,4 +130,4 @@ def force_avx2_width() -> bool:
     return forced
 
 
-__all__ = ["force_avx2_width", "prefer_512_bit"]
+__all__ = ["WIDTH_CHOICES", "force_avx2_width", "prefer_512_bit"]
