@@ -553,6 +553,8 @@ def test_an_unsigned_controller_in_charge_is_named_outside_the_graph(join_script
         r = hexapod_cli(s.domain, "status")
         return f"publishers outside the graph: {T.JOINT_COMMANDS}: /unsigned_ctl" in r.stdout
     s.wait_for(named, 60, "status naming the unsigned controller")
+    # its dropped commands leave the tick unanswered: after the 1 s cap, held then fallback
+    s.wait_log("hexapod_sim", "falling back to joint damping")
     code = stop(s, rogue)
     assert code == EXIT_CODES["fallback"], (code, s.stderr())
     summary = [ln for ln in s.log("hexapod_sim").splitlines() if "stopped at tick" in ln]
