@@ -249,80 +249,46 @@ def c4(ideal: Mapping[float, Mapping[str, Point]],
     a number with a continuous-time limit: it then decides the torque-impulse sign, and the
     torque step (whose samples' differences grow as dt shrinks) is only reported.
     """
-    if impact is not None:
-        return _c4_impact(ideal, torque_step, impact, tracking)
     xh, yh = tracking[0], tracking[1]
     scales = sorted(ideal)
     hard = [s for s in scales if s > 1.0]
     base = ideal[min(scales, key=lambda s: abs(s - 1.0))]["pd_pf"]
     err_base = total([base[xh], base[yh]])
-    signs: list[Tri] = []
     diverged = [s for s in hard if ideal[s]["pd_pf"][xh].diverged]
-    signs += [True if ideal[s]["pd_pf"][xh].converged else None for s in diverged]
+    signs: list[Tri] = [True if ideal[s]["pd_pf"][xh].converged else None for s in diverged]
     growth = {s: _ratio(total([ideal[s]["pd_pf"][xh], ideal[s]["pd_pf"][yh]]),
                         err_base) for s in hard if s not in diverged}
     steps = {s: _ratio(torque_step[s]["pd_pf"], torque_step[s]["pd_p"]) for s in hard
              if s in torque_step}
+    steps_text = ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in steps.items())
+    if impact is None:  # the torque step decides the torque-impulse sign
+        deciding, name = steps, "torque step"
+        rule = "its largest tick-to-tick torque step"
+        tail = f"its largest torque step is {steps_text}"
+    else:  # the impact torque decides; the torque step is only reported
+        deciding = {s: _ratio(impact[s]["pd_pf"], impact[s]["pd_p"]) for s in hard
+                    if s in impact}
+        name = "impact torque"
+        rule = "its impact torque (mean peak |T_m| within 20 ms after each touchdown)"
+        tail = ("its impact torque (mean peak |T_m| within 20 ms after a touchdown) is "
+                + ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %"
+                            for s, r in deciding.items())
+                + f"; (not deciding) its largest tick-to-tick torque step is {steps_text}")
     signs += [at_least(g, C4_FACTOR) for g in growth.values()]
-    signs += [at_least(r, C4_FACTOR) for r in steps.values()]
+    signs += [at_least(r, C4_FACTOR) for r in deciding.values()]
     named = ([f"divergence at {100 * s:.3g} %" for s in diverged]
              + [f"hip error growth x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items()]
-             + [f"torque step x{r.text(3)} PD-P's at {100 * s:.3g} %"
-                for s, r in steps.items()])
+             + [f"{name} x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in deciding.items()])
     ev = (f"PD-P&F diverged at {', '.join(f'{100 * s:.3g} %' for s in diverged) or 'no ground'}"
           "; its hip errors on hard ground reach "
           + ", ".join(f"x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items())
-          + " of the 100 % value; its largest torque step is "
-          + ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in steps.items()))
+          + f" of the 100 % value; {tail}")
     return Verdict("C4", "T_max -> inf: PD-P&F shows stability problems (torque impulses at "
                    "foot impacts, growing errors) on ground harder than the base",
                    status_of(any3(signs)),
                    f"on ground > 100 % at T_max = inf, PD-P&F diverges, or its hip errors grow "
-                   f">= {C4_FACTOR:g}x its 100 % value, or its largest tick-to-tick torque step "
-                   f"is >= {C4_FACTOR:g}x PD-P's, over the whole dt-convergence band", ev,
-                   tuple(n for n, t in zip(named, signs) if t is False),
-                   tuple(n for n, t in zip(named, signs) if t is None))
-
-
-def _c4_impact(ideal: Mapping[float, Mapping[str, Point]],
-               torque_step: Mapping[float, Mapping[str, Measured]],
-               impact: Mapping[float, Mapping[str, Measured]],
-               tracking: Sequence[str] = TRACKING) -> Verdict:
-    """C4 with the impact torque deciding the torque-impulse sign (see :func:`c4`)."""
-    xh, yh = tracking[0], tracking[1]
-    scales = sorted(ideal)
-    hard = [s for s in scales if s > 1.0]
-    base = ideal[min(scales, key=lambda s: abs(s - 1.0))]["pd_pf"]
-    err_base = total([base[xh], base[yh]])
-    signs: list[Tri] = []
-    diverged = [s for s in hard if ideal[s]["pd_pf"][xh].diverged]
-    signs += [True if ideal[s]["pd_pf"][xh].converged else None for s in diverged]
-    growth = {s: _ratio(total([ideal[s]["pd_pf"][xh], ideal[s]["pd_pf"][yh]]),
-                        err_base) for s in hard if s not in diverged}
-    peaks = {s: _ratio(impact[s]["pd_pf"], impact[s]["pd_p"]) for s in hard if s in impact}
-    steps = {s: _ratio(torque_step[s]["pd_pf"], torque_step[s]["pd_p"]) for s in hard
-             if s in torque_step}
-    signs += [at_least(g, C4_FACTOR) for g in growth.values()]
-    signs += [at_least(r, C4_FACTOR) for r in peaks.values()]
-    named = ([f"divergence at {100 * s:.3g} %" for s in diverged]
-             + [f"hip error growth x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items()]
-             + [f"impact torque x{r.text(3)} PD-P's at {100 * s:.3g} %"
-                for s, r in peaks.items()])
-    ev = (f"PD-P&F diverged at {', '.join(f'{100 * s:.3g} %' for s in diverged) or 'no ground'}"
-          "; its hip errors on hard ground reach "
-          + ", ".join(f"x{g.text(3)} at {100 * s:.3g} %" for s, g in growth.items())
-          + " of the 100 % value; its impact torque (mean peak |T_m| within 20 ms after a "
-          "touchdown) is "
-          + ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in peaks.items())
-          + "; (not deciding) its largest tick-to-tick torque step is "
-          + ", ".join(f"x{r.text(3)} PD-P's at {100 * s:.3g} %" for s, r in steps.items()))
-    return Verdict("C4", "T_max -> inf: PD-P&F shows stability problems (torque impulses at "
-                   "foot impacts, growing errors) on ground harder than the base",
-                   status_of(any3(signs)),
-                   f"on ground > 100 % at T_max = inf, PD-P&F diverges, or its hip errors grow "
-                   f">= {C4_FACTOR:g}x its 100 % value, or its impact torque (mean peak |T_m| "
-                   f"within 20 ms after each touchdown) is >= {C4_FACTOR:g}x PD-P's, over the "
-                   f"whole dt-convergence band", ev,
+                   f">= {C4_FACTOR:g}x its 100 % value, or {rule} is >= {C4_FACTOR:g}x PD-P's, "
+                   f"over the whole dt-convergence band", ev,
                    tuple(n for n, t in zip(named, signs) if t is False),
                    tuple(n for n, t in zip(named, signs) if t is None))
 
