@@ -155,6 +155,28 @@ class MonteCarloResult:
         }
 
 
+def _checked(seeds: Sequence[int], controllers: Sequence[str]) -> list[int]:
+    """The seeds as ints (distinct, each in range); ValueError on none or repeated ones."""
+    out = [check_seed(s, "seed") for s in seeds]
+    if len(set(out)) != len(out):
+        raise ValueError("seeds must be distinct")
+    if not controllers:
+        raise ValueError("at least one controller")
+    return out
+
+
+def _run_all(tasks: Sequence[McTask], backend: Backend | None,
+             progress: Callable[[int], None] | None) -> list[McRun]:
+    """:func:`run_task` of every task on ``backend`` (default: this process), in order;
+    ``progress(1)`` after each run."""
+    out: list[McRun | None] = [None] * len(tasks)
+    for k, r in (backend or InlineBackend()).calls(run_task, tasks):
+        out[k] = r
+        if progress is not None:
+            progress(1)
+    return [r for r in out if r is not None]
+
+
 def monte_carlo(p: HexapodParams, controllers: Sequence[str], seeds: Sequence[int],
                 spread: float, duration: float | None = None,
                 backend: Backend | None = None,
@@ -163,19 +185,10 @@ def monte_carlo(p: HexapodParams, controllers: Sequence[str], seeds: Sequence[in
     """Run every controller on the ground of every seed (common random numbers) and
     collect the runs; ``progress(1)`` after each run."""
     spread = check_spread(spread)
-    seeds = [check_seed(s, "seed") for s in seeds]
-    if len(set(seeds)) != len(seeds):
-        raise ValueError("seeds must be distinct")
-    if not controllers:
-        raise ValueError("at least one controller")
+    seeds = _checked(seeds, controllers)
     duration = p.run.duration if duration is None else duration
-    tasks = [McTask(p, c, s, spread, duration) for c in controllers for s in seeds]
-    out: list[McRun | None] = [None] * len(tasks)
-    for k, r in (backend or InlineBackend()).calls(run_task, tasks):
-        out[k] = r
-        if progress is not None:
-            progress(1)
-    done = [r for r in out if r is not None]
+    done = _run_all([McTask(p, c, s, spread, duration) for c in controllers for s in seeds],
+                    backend, progress)
     n = len(seeds)
     runs = {c: done[j * n:(j + 1) * n] for j, c in enumerate(controllers)}
     return MonteCarloResult(tuple(controllers), tuple(seeds), spread, p.ground.scale,
@@ -241,11 +254,7 @@ def monte_carlo_grid(p: HexapodParams, controllers: Sequence[str], seeds: Sequen
                      level: float = 0.95) -> list[GridPoint]:
     """E8: :func:`monte_carlo` at every (ground %, spread, T_max), all runs in one pass
     over the backend (the same seeds, hence the same ground sequences, at every point)."""
-    seeds = [check_seed(s, "seed") for s in seeds]
-    if len(set(seeds)) != len(seeds):
-        raise ValueError("seeds must be distinct")
-    if not controllers:
-        raise ValueError("at least one controller")
+    seeds = _checked(seeds, controllers)
     duration = p.run.duration if duration is None else duration
     points = [(float(g), check_spread(s), float(t)) for t in t_max_values
               for g in ground_percents for s in spreads]
@@ -253,12 +262,7 @@ def monte_carlo_grid(p: HexapodParams, controllers: Sequence[str], seeds: Sequen
     for g, s, t in points:
         q = p.with_values(**{"ground.scale": g / 100.0, "actuator.t_max": t})
         tasks += [McTask(q, c, k, s, duration) for c in controllers for k in seeds]
-    out: list[McRun | None] = [None] * len(tasks)
-    for k, r in (backend or InlineBackend()).calls(run_task, tasks):
-        out[k] = r
-        if progress is not None:
-            progress(1)
-    done = [r for r in out if r is not None]
+    done = _run_all(tasks, backend, progress)
     n, per = len(seeds), len(seeds) * len(controllers)
     grid = []
     for j, (g, s, t) in enumerate(points):
