@@ -168,13 +168,13 @@ def s4_as_a_user_sees_it(pairs: int, base: int) -> int:
                     print(f"no summary in the sim's log of --duration {duration:g}",
                           file=sys.stderr)
                     return 1
+                loop, hold_s = float(m.group(5)), float(h.group(2))
                 walls[duration].append(wall)
-                loops[duration].append(float(m.group(5)))
-                held[duration].append(float(h.group(2)))
+                loops[duration].append(loop)
+                held[duration].append(hold_s)
                 print(f"pair {i + 1}: --duration {duration:g}: wall {wall:.2f} s, of which the "
-                      f"tick loop {float(m.group(5)):.2f} s (recorder holds {h.group(1)}, "
-                      f"{float(h.group(2)):.2f} s), the rest {wall - float(m.group(5)):.2f} s",
-                      flush=True)
+                      f"tick loop {loop:.2f} s (recorder holds {h.group(1)}, {hold_s:.2f} s), "
+                      f"the rest {wall - loop:.2f} s", flush=True)
     rtfs = [15.0 / (b - a) for a, b in zip(walls[5.0], walls[20.0])]
     loop_rtfs = [15.0 / (b - a) for a, b in zip(loops[5.0], loops[20.0])]
     rest = {d: statistics.median(w - lp for w, lp in zip(walls[d], loops[d])) for d in walls}
